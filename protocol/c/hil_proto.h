@@ -118,7 +118,8 @@ typedef enum {
     HIL_PARAM_FLUX_DRIFT_CUTOFF_HZ = 33,
     HIL_PARAM_TELEMETRY_DIVIDER = 40,
     HIL_PARAM_OVERCURRENT_A = 41,
-    HIL_PARAM_ENCODER_LOSS_TIMEOUT_S = 42
+    HIL_PARAM_ENCODER_LOSS_TIMEOUT_S = 42,
+    HIL_PARAM_CONTROL_STEP_CYCLES = 50 /* read-only: cycles of the last control step on target (SysTick) */
 } hil_param_id;
 
 typedef struct {
