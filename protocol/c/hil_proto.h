@@ -250,13 +250,19 @@ int hil_payload_decode(uint8_t type, const uint8_t *payload, size_t len, hil_msg
 int hil_frame_encode(const hil_msg *msg, uint8_t *out, size_t cap);
 
 /* Byte-at-a-time stream decoder. Resynchronises at the next 0x00 after garbage;
- * counts errors instead of failing. */
+ * counts errors instead of failing. COBS is undone as the bytes arrive, so the
+ * buffer holds the decoded frame only. */
+#define HIL_MAX_ENCODED_SEGMENT (HIL_MAX_ENCODED_FRAME - 1u) /* bytes between two delimiters */
 typedef struct {
-    uint8_t buf[HIL_MAX_ENCODED_FRAME];
-    size_t len;
-    uint8_t overflow; /* the current frame outgrew buf: discard up to the next delimiter */
+    uint8_t buf[HIL_MAX_RAW_FRAME]; /* decoded bytes of the current frame */
+    size_t len;                     /* decoded bytes in buf */
+    size_t encoded_len;             /* encoded bytes since the last delimiter */
+    uint8_t cobs_left;              /* data bytes left in the current COBS block */
+    uint8_t cobs_zero;              /* the current block ends in an implied zero */
+    uint8_t overflow; /* the current frame outgrew the limit: discard up to the next delimiter */
     uint8_t have_seq;
     uint8_t last_seq;
+    uint8_t last_bad_version; /* header version of the last frame rejected for its version */
     uint32_t frames_ok;
     uint32_t crc_errors;
     uint32_t framing_errors;  /* bad COBS, too long, too short, length field mismatch */
@@ -281,26 +287,40 @@ typedef struct {
     uint8_t data[8];
 } hil_can_frame;
 
-/* Returns the number of frames written, or a negative hil_result. */
+/* Returns the number of frames written, or a negative hil_result. msg->seq & 0x0F
+ * numbers multi-frame messages (the segmentation header). */
 int hil_can_pack(const hil_msg *msg, uint8_t sender_role, uint16_t base_id, hil_can_frame *frames,
                  size_t max_frames);
 
+/* Reassembly state of one sender role's multi-frame message. */
+typedef struct {
+    uint8_t type;       /* message being reassembled, 0 when none */
+    uint8_t counter;    /* message counter from the segmentation header */
+    uint8_t next_index; /* index the next frame must carry */
+    uint8_t len;        /* payload bytes received so far */
+    uint8_t skip_type;  /* the rest of this abandoned message is dropped uncounted, 0 when none */
+    uint8_t skip_counter;
+    uint8_t buf[HIL_MAX_PAYLOAD];
+} hil_can_slot;
+
+#define HIL_CAN_ROLES 2u
+#define HIL_CAN_ID_SPAN 0x40u /* ids base_id .. base_id + 0x3F belong to the protocol */
+
 typedef struct {
     uint16_t base_id;
-    uint8_t type;      /* message being reassembled, 0 when none */
-    uint8_t expected;  /* frames in the message */
-    uint8_t received;  /* frames received so far */
-    uint8_t buf[HIL_MAX_PAYLOAD + 8u];
-    size_t len;
-    uint32_t last_period_low; /* for extending truncated period fields, see SPEC.md */
+    hil_can_slot slot[HIL_CAN_ROLES]; /* one per sender role: their frames may interleave */
+    uint32_t last_period;  /* reference for extending truncated period fields, see SPEC.md */
+    uint8_t have_period;
     uint32_t messages_ok;
-    uint32_t sequence_errors; /* a multi-frame message arrived out of order or incomplete */
+    uint32_t sequence_errors; /* multi-frame messages lost to a missing or out-of-order frame */
     uint32_t unknown_types;
-    uint32_t length_errors;
+    uint32_t length_errors;   /* frames or messages of the wrong length */
+    uint32_t ignored_frames;  /* identifiers outside base_id .. base_id + 0x3F */
 } hil_can_rx;
 
 void hil_can_rx_init(hil_can_rx *rx, uint16_t base_id);
-/* Returns 1 and fills *out (and *sender_role if not NULL) when a frame completes a message, else 0. */
+/* Returns 1 and fills *out (and *sender_role if not NULL) when a frame completes a message, else 0.
+ * out->seq is the segmentation counter of a multi-frame message, 0 for a single frame. */
 int hil_can_rx_feed(hil_can_rx *rx, const hil_can_frame *frame, hil_msg *out, uint8_t *sender_role);
 
 #ifdef __cplusplus

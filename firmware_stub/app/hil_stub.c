@@ -1,0 +1,298 @@
+#include "hil_stub.h"
+
+#include <string.h>
+
+#include "control.h"
+
+#define STR_(x) #x
+#define STR(x) STR_(x)
+
+#if defined(__x86_64__)
+#define HIL_STUB_TARGET "x86_64"
+#elif defined(__aarch64__)
+#define HIL_STUB_TARGET "aarch64"
+#elif defined(__ARM_ARCH_7EM__) && defined(__ARM_FP)
+#define HIL_STUB_TARGET "cm4f"
+#elif defined(__arm__)
+#define HIL_STUB_TARGET "arm"
+#else
+#define HIL_STUB_TARGET "unknown"
+#endif
+
+#if defined(__clang__)
+#define HIL_STUB_COMPILER "clang" STR(__clang_major__)
+#elif defined(__GNUC__)
+#define HIL_STUB_COMPILER "gcc" STR(__GNUC__)
+#else
+#define HIL_STUB_COMPILER "cc"
+#endif
+
+#ifndef HIL_STUB_OPT
+#define HIL_STUB_OPT ""
+#endif
+
+static const char stub_name[] = "hil-stub " HIL_STUB_VERSION " " HIL_STUB_TARGET " " HIL_STUB_COMPILER " " HIL_STUB_OPT;
+/* compile-time check that the name fits HELLO */
+typedef char stub_name_fits_hello[(sizeof stub_name - 1u <= HIL_NAME_MAX) ? 1 : -1];
+
+#define OUT_BYTES 1024u
+#define OUT_FRAMES 64u
+
+enum { TRANSPORT_BYTES = 0, TRANSPORT_CAN = 1 };
+
+typedef struct {
+    ctl core;
+    hil_decoder dec;
+    hil_can_rx can_rx;
+    hil_stub_counters counters;
+    uint32_t (*read_cycles)(void);
+    uint32_t samples;       /* SAMPLEs answered, for the telemetry divider */
+    uint32_t last_period;   /* of the last SAMPLE */
+    uint16_t can_base;
+    uint8_t transport;
+    uint8_t seq;
+    uint8_t shutdown;
+    uint8_t reported_state; /* last state sent in STATUS */
+    size_t out_len;
+    uint8_t out[OUT_BYTES];
+    size_t can_out_len;
+    hil_can_frame can_out[OUT_FRAMES];
+} hil_stub;
+
+size_t hil_stub_instance_size(void) { return sizeof(hil_stub); }
+
+const char *hil_stub_name(void) { return stub_name; }
+
+void hil_stub_init(void *inst)
+{
+    hil_stub *s = (hil_stub *)inst;
+    memset(s, 0, sizeof *s);
+    ctl_init(&s->core);
+    hil_decoder_init(&s->dec);
+    s->can_base = HIL_CAN_DEFAULT_BASE_ID;
+    hil_can_rx_init(&s->can_rx, s->can_base);
+    s->reported_state = HIL_STATE_IDLE;
+}
+
+void hil_stub_set_can_base(void *inst, uint16_t base_id)
+{
+    hil_stub *s = (hil_stub *)inst;
+    s->can_base = base_id;
+    hil_can_rx_init(&s->can_rx, base_id);
+}
+
+void hil_stub_set_cycle_counter(void *inst, uint32_t (*read_cycles)(void))
+{
+    ((hil_stub *)inst)->read_cycles = read_cycles;
+}
+
+int hil_stub_shutdown_requested(const void *inst) { return ((const hil_stub *)inst)->shutdown; }
+
+size_t hil_stub_pending(const void *inst)
+{
+    const hil_stub *s = (const hil_stub *)inst;
+    return s->transport == TRANSPORT_CAN ? s->can_out_len : s->out_len;
+}
+
+void hil_stub_get_counters(const void *inst, hil_stub_counters *out)
+{
+    const hil_stub *s = (const hil_stub *)inst;
+    *out = s->counters;
+    if (s->transport == TRANSPORT_CAN) {
+        out->decode_errors = s->can_rx.sequence_errors + s->can_rx.unknown_types + s->can_rx.length_errors;
+    } else {
+        out->decode_errors = s->dec.crc_errors + s->dec.framing_errors + s->dec.length_errors +
+                             s->dec.version_errors + s->dec.unknown_types;
+    }
+}
+
+/* Queues one message in the encoding of the current transport. */
+static void emit(hil_stub *s, hil_msg *m)
+{
+    m->seq = s->seq;
+    if (s->transport == TRANSPORT_CAN) {
+        int n = hil_can_pack(m, HIL_ROLE_CONTROLLER, s->can_base, s->can_out + s->can_out_len,
+                             OUT_FRAMES - s->can_out_len);
+        if (n < 0) {
+            s->counters.tx_overflows++;
+            return;
+        }
+        s->can_out_len += (size_t)n;
+    } else {
+        int n = hil_frame_encode(m, s->out + s->out_len, OUT_BYTES - s->out_len);
+        if (n < 0) {
+            s->counters.tx_overflows++;
+            return;
+        }
+        s->out_len += (size_t)n;
+    }
+    s->seq++;
+}
+
+static void emit_status(hil_stub *s)
+{
+    hil_msg m;
+    m.type = HIL_MSG_STATUS;
+    m.u.status.period = s->last_period;
+    m.u.status.state = s->core.st.state;
+    m.u.status.fault_code = s->core.st.fault_code;
+    s->reported_state = s->core.st.state;
+    emit(s, &m);
+}
+
+/* A state change the bench has not heard of: FAULT first when it is a trip, then STATUS. */
+static void report_state(hil_stub *s)
+{
+    if (s->core.st.state == s->reported_state) {
+        return;
+    }
+    if (s->core.st.state == HIL_STATE_FAULT) {
+        hil_msg m;
+        m.type = HIL_MSG_FAULT;
+        m.u.fault.period = s->core.st.fault_period;
+        m.u.fault.code = s->core.st.fault_code;
+        m.u.fault.value = s->core.st.fault_value;
+        emit(s, &m);
+    }
+    emit_status(s);
+}
+
+static void on_sample(hil_stub *s, const hil_sample *sample)
+{
+    hil_msg m;
+    s->last_period = sample->period;
+    uint32_t c0 = s->read_cycles ? s->read_cycles() : 0u;
+    uint8_t gates = ctl_step(&s->core, sample, &m.u.telemetry);
+    if (s->read_cycles) {
+        s->core.st.step_cycles = s->read_cycles() - c0;
+    }
+    hil_msg g;
+    g.type = HIL_MSG_GATES;
+    g.u.gates.period = sample->period;
+    g.u.gates.gates = gates;
+    emit(s, &g);
+    s->samples++;
+    uint32_t div = s->core.params.telemetry_divider;
+    if (div != 0u && s->samples % div == 0u) {
+        m.type = HIL_MSG_TELEMETRY;
+        emit(s, &m);
+    }
+    report_state(s);
+}
+
+static void on_command(hil_stub *s, const hil_command *cmd)
+{
+    if (ctl_set_command(&s->core, cmd) != 0) {
+        /* an unknown speed source is a bench bug: stop switching and say why */
+        ctl_state *st = &s->core.st;
+        st->state = HIL_STATE_FAULT;
+        st->fault_code = HIL_FAULT_PROTOCOL;
+        st->fault_value = (float)cmd->speed_source;
+        st->fault_period = s->last_period;
+        report_state(s);
+        return;
+    }
+    emit_status(s);
+}
+
+static void on_param(hil_stub *s, const hil_msg *in)
+{
+    hil_msg m;
+    m.type = HIL_MSG_PARAM_VALUE;
+    if (in->type == HIL_MSG_PARAM_SET) {
+        m.u.param_value.id = in->u.param_set.id;
+        m.u.param_value.status = ctl_param_set(&s->core, in->u.param_set.id, in->u.param_set.value,
+                                               &m.u.param_value.value);
+    } else {
+        m.u.param_value.id = in->u.param_get.id;
+        m.u.param_value.status = ctl_param_get(&s->core, in->u.param_get.id, &m.u.param_value.value);
+    }
+    emit(s, &m);
+}
+
+static void dispatch(hil_stub *s, const hil_msg *in)
+{
+    hil_msg m;
+    switch (in->type) {
+    case HIL_MSG_SAMPLE:
+        on_sample(s, &in->u.sample);
+        break;
+    case HIL_MSG_HELLO:
+        m.type = HIL_MSG_HELLO;
+        m.u.hello.proto_version = HIL_PROTO_VERSION;
+        m.u.hello.role = HIL_ROLE_CONTROLLER;
+        m.u.hello.capabilities = HIL_CAP_GATES | HIL_CAP_TELEMETRY | HIL_CAP_CAN;
+        m.u.hello.control_period_ns = (uint32_t)(s->core.params.control_period_s * 1e9f + 0.5f);
+        m.u.hello.name_len = (uint8_t)(sizeof stub_name - 1u);
+        memcpy(m.u.hello.name, stub_name, sizeof stub_name - 1u);
+        emit(s, &m);
+        break;
+    case HIL_MSG_COMMAND:
+        on_command(s, &in->u.command);
+        break;
+    case HIL_MSG_PARAM_SET:
+    case HIL_MSG_PARAM_GET:
+        on_param(s, in);
+        break;
+    case HIL_MSG_HEARTBEAT:
+        m.type = HIL_MSG_HEARTBEAT;
+        m.u.heartbeat.counter = in->u.heartbeat.counter;
+        emit(s, &m);
+        break;
+    case HIL_MSG_SHUTDOWN: {
+        hil_command off = {0u, s->core.cmd.speed_source, 0.0f, 0.0f, 0.0f};
+        (void)ctl_set_command(&s->core, &off);
+        s->shutdown = 1u;
+        emit_status(s);
+        break;
+    }
+    default:
+        s->counters.ignored++; /* controller-to-bench types: nothing to do */
+        return;
+    }
+    s->counters.frames_in++;
+}
+
+size_t hil_stub_exchange(void *inst, const uint8_t *rx, size_t rx_len, uint8_t *tx, size_t tx_cap)
+{
+    hil_stub *s = (hil_stub *)inst;
+    s->transport = TRANSPORT_BYTES;
+    hil_msg in;
+    for (size_t i = 0; i < rx_len; ++i) {
+        if (hil_decoder_feed(&s->dec, rx[i], &in)) {
+            dispatch(s, &in);
+        }
+    }
+    size_t n = s->out_len < tx_cap ? s->out_len : tx_cap;
+    if (n > 0u) {
+        memcpy(tx, s->out, n);
+        memmove(s->out, s->out + n, s->out_len - n);
+        s->out_len -= n;
+    }
+    return n;
+}
+
+size_t hil_stub_can_exchange(void *inst, const hil_can_frame *rx, size_t rx_count, hil_can_frame *tx,
+                             size_t tx_cap)
+{
+    hil_stub *s = (hil_stub *)inst;
+    s->transport = TRANSPORT_CAN;
+    hil_msg in;
+    for (size_t i = 0; i < rx_count; ++i) {
+        uint8_t role = HIL_ROLE_CONTROLLER;
+        if (hil_can_rx_feed(&s->can_rx, &rx[i], &in, &role)) {
+            if (role == HIL_ROLE_BENCH) {
+                dispatch(s, &in);
+            } else {
+                s->counters.ignored++; /* our own frames echoed back */
+            }
+        }
+    }
+    size_t n = s->can_out_len < tx_cap ? s->can_out_len : tx_cap;
+    if (n > 0u) {
+        memcpy(tx, s->can_out, n * sizeof tx[0]);
+        memmove(s->can_out, s->can_out + n, (s->can_out_len - n) * sizeof tx[0]);
+        s->can_out_len -= n;
+    }
+    return n;
+}

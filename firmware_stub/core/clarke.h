@@ -1,0 +1,27 @@
+/*
+ * Clarke transform from two measured phase currents, eq. (8)-(9), starting
+ * from raw ADC counts through the scaling the bench pushes with PARAM_SET.
+ * With an isolated star point i_a + i_b + i_c = 0, so any two phases suffice.
+ */
+#ifndef CLARKE_H
+#define CLARKE_H
+
+#include <stdint.h>
+
+typedef enum { CLARKE_PHASES_AB = 0, CLARKE_PHASES_AC = 1, CLARKE_PHASES_BC = 2 } clarke_phases;
+
+typedef struct {
+    float current_a_per_count;   /* ADC scale, A per count */
+    float current_offset_counts; /* ADC count at zero current */
+    uint8_t phases;              /* clarke_phases: which phases adc_i1, adc_i2 measure */
+} clarke_cfg;
+
+typedef struct {
+    float i_alpha_a;
+    float i_beta_a;
+    float i_peak_a; /* max(|i_a|, |i_b|, |i_c|), for the overcurrent trip */
+} clarke_out;
+
+void clarke_from_adc(const clarke_cfg *cfg, uint16_t adc_i1, uint16_t adc_i2, clarke_out *out);
+
+#endif

@@ -1,0 +1,400 @@
+#include "control.h"
+
+#include <math.h>
+#include <stddef.h>
+#include <string.h>
+
+#include "defaults.h"
+#include "fastmath.h"
+
+void ctl_params_default(ctl_params *p)
+{
+    p->control_period_s = CTL_DEFAULT_CONTROL_PERIOD_S;
+    p->current_a_per_count = CTL_DEFAULT_CURRENT_A_PER_COUNT;
+    p->current_offset_counts = CTL_DEFAULT_CURRENT_OFFSET_COUNTS;
+    p->vdc_v_per_count = CTL_DEFAULT_VDC_V_PER_COUNT;
+    p->vdc_offset_counts = CTL_DEFAULT_VDC_OFFSET_COUNTS;
+    p->encoder_counts_per_rev = CTL_DEFAULT_ENCODER_COUNTS_PER_REV;
+    p->current_phases = CTL_DEFAULT_CURRENT_PHASES;
+    p->pole_pairs = CTL_DEFAULT_POLE_PAIRS;
+    p->stator_resistance_ohm = CTL_DEFAULT_STATOR_RESISTANCE_OHM;
+    p->stator_inductance_h = CTL_DEFAULT_STATOR_INDUCTANCE_H;
+    p->magnet_flux_wb = CTL_DEFAULT_MAGNET_FLUX_WB;
+    p->torque_limit_nm = CTL_DEFAULT_TORQUE_LIMIT_NM;
+
+    float t = p->control_period_s;
+    float psi_f = p->magnet_flux_wb;
+    float ls = p->stator_inductance_h;
+    /* Flux reference: the i_d = 0 stator flux at half the torque limit,
+     * |psi| = sqrt(psi_f^2 + (Ls i_q)^2) with i_q = T / (3/2 p psi_f). */
+    float iq_a = 0.5f * p->torque_limit_nm / (1.5f * p->pole_pairs * psi_f);
+    p->flux_ref_wb = sqrtf(psi_f * psi_f + (ls * iq_a) * (ls * iq_a));
+    /* Bands of one period's step: one active vector moves the flux by 2/3 Vdc T
+     * and, at standstill, the torque by 3/2 p psi_f (Vdc/sqrt3) T / Ls. A
+     * narrower band cannot be resolved at this period; a wider one adds ripple. */
+    p->flux_band_wb = 2.0f / 3.0f * CTL_DESIGN_DC_LINK_V * t;
+    p->torque_band_nm = 1.5f * p->pole_pairs * psi_f * CTL_DESIGN_DC_LINK_V * FM_INV_SQRT3 * t / ls;
+    /* Speed PI: double closed-loop pole at the design bandwidth on 1/(J s). */
+    float wb = FM_TWO_PI * CTL_DESIGN_SPEED_BANDWIDTH_HZ;
+    p->speed_kp_nm_per_rad_s = 2.0f * CTL_DESIGN_INERTIA_KG_M2 * wb;
+    p->speed_ki_nm_per_rad = CTL_DESIGN_INERTIA_KG_M2 * wb * wb;
+    p->speed_lpf_cutoff_hz = CTL_DESIGN_LPF_OVER_SPEED_BANDWIDTH * CTL_DESIGN_SPEED_BANDWIDTH_HZ;
+    p->ekf_k1 = CTL_DEFAULT_EKF_K1;
+    p->ekf_k2_rad_s = CTL_DEFAULT_EKF_K2_RAD_S;
+    p->ekf_k3_rad_s = CTL_DEFAULT_EKF_K3_RAD_S;
+    p->flux_drift_cutoff_hz = CTL_DEFAULT_FLUX_DRIFT_CUTOFF_HZ;
+    p->telemetry_divider = CTL_DEFAULT_TELEMETRY_DIVIDER;
+    p->overcurrent_a = CTL_DEFAULT_OVERCURRENT_A;
+    p->encoder_loss_timeout_s = CTL_DEFAULT_ENCODER_LOSS_TIMEOUT_S;
+    p->encoder_loss_min_speed_rad_s = CTL_DEFAULT_ENCODER_LOSS_MIN_SPEED_RAD_S;
+    p->encoder_window_periods = CTL_DEFAULT_ENCODER_WINDOW_PERIODS;
+}
+
+void ctl_derive(ctl *c)
+{
+    const ctl_params *p = &c->params;
+    ctl_cfg *k = &c->cfg;
+    float t = p->control_period_s;
+
+    k->clarke.current_a_per_count = p->current_a_per_count;
+    k->clarke.current_offset_counts = p->current_offset_counts;
+    k->clarke.phases = p->current_phases;
+
+    k->flux.stator_resistance_ohm = p->stator_resistance_ohm;
+    k->flux.stator_inductance_h = p->stator_inductance_h;
+    k->flux.magnet_flux_wb = p->magnet_flux_wb;
+    k->flux.control_period_s = t;
+    k->flux.drift_cutoff_hz = p->flux_drift_cutoff_hz;
+    fluxobs_derive(&k->flux);
+
+    k->flux_hyst.band = p->flux_band_wb;
+    k->torque_hyst.band = p->torque_band_nm;
+
+    k->pi.kp_nm_per_rad_s = p->speed_kp_nm_per_rad_s;
+    k->pi.ki_nm_per_rad = p->speed_ki_nm_per_rad;
+    k->pi.torque_limit_nm = p->torque_limit_nm;
+    k->pi.control_period_s = t;
+
+    k->enc.counts_per_rev = p->encoder_counts_per_rev;
+    k->enc.pole_pairs = p->pole_pairs;
+    k->enc.control_period_s = t;
+    k->enc.window_periods = p->encoder_window_periods;
+    enc_derive(&k->enc);
+
+    k->conv.control_period_s = t;
+    k->conv.lpf_cutoff_hz = p->speed_lpf_cutoff_hz;
+    conv_derive(&k->conv);
+
+    k->ekf.control_period_s = t;
+    k->ekf.k1 = p->ekf_k1;
+    k->ekf.k2_rad_s = p->ekf_k2_rad_s;
+    k->ekf.k3_rad_s = p->ekf_k3_rad_s;
+
+    k->rotor.stator_inductance_h = p->stator_inductance_h;
+    k->rotor.magnet_flux_wb = p->magnet_flux_wb;
+    k->rotor.pole_pairs = p->pole_pairs;
+    rotor_derive(&k->rotor);
+
+    k->prot.overcurrent_a = p->overcurrent_a;
+    k->prot.encoder_loss_timeout_s = p->encoder_loss_timeout_s;
+    k->prot.encoder_loss_min_speed_rad_s = p->encoder_loss_min_speed_rad_s;
+    k->prot.control_period_s = t;
+
+    k->vdc_v_per_count = p->vdc_v_per_count;
+    k->vdc_offset_counts = p->vdc_offset_counts;
+    k->pole_pairs = p->pole_pairs;
+    k->inv_pole_pairs = 1.0f / p->pole_pairs;
+    k->magnet_flux_wb = p->magnet_flux_wb;
+    k->stator_inductance_h = p->stator_inductance_h;
+}
+
+void ctl_init(ctl *c)
+{
+    memset(c, 0, sizeof *c);
+    ctl_params_default(&c->params);
+    ctl_derive(c);
+    c->cmd.enable = 0u;
+    c->cmd.torque_mode = 0u;
+    c->cmd.speed_source = HIL_SPEED_ENCODER;
+    c->cmd.speed_ref_rad_s = 0.0f;
+    c->cmd.torque_ref_nm = 0.0f;
+    c->cmd.flux_ref_wb = 0.0f;
+    c->st.started = 0u;
+    c->st.gates_prev = 0u;
+    c->st.state = HIL_STATE_IDLE;
+    c->st.fault_code = HIL_FAULT_NONE;
+    c->st.fault_value = 0.0f;
+    c->st.fault_period = 0u;
+    c->st.step_cycles = 0u;
+    c->st.pi.integral_nm = 0.0f;
+    c->st.flux_hyst.out = 1u;
+    c->st.torque_hyst.out = 1u;
+    prot_reset(&c->st.prot, 0u);
+}
+
+int ctl_set_command(ctl *c, const hil_command *cmd)
+{
+    if (cmd->speed_source > HIL_SPEED_EKF) {
+        return -1;
+    }
+    c->cmd.enable = (cmd->flags & HIL_CMD_ENABLE) ? 1u : 0u;
+    c->cmd.torque_mode = (cmd->flags & HIL_CMD_TORQUE_MODE) ? 1u : 0u;
+    c->cmd.speed_source = cmd->speed_source;
+    c->cmd.speed_ref_rad_s = cmd->speed_ref_rad_s;
+    c->cmd.torque_ref_nm = cmd->torque_ref_nm;
+    c->cmd.flux_ref_wb = cmd->flux_ref_wb;
+    ctl_state *st = &c->st;
+    if (!c->cmd.enable) {
+        st->state = HIL_STATE_IDLE;
+        st->fault_code = HIL_FAULT_NONE;
+        st->fault_value = 0.0f;
+    } else if (st->state == HIL_STATE_IDLE) {
+        st->state = HIL_STATE_RUNNING;
+        st->pi.integral_nm = 0.0f;
+        st->flux_hyst.out = 1u;
+        st->torque_hyst.out = 1u;
+        prot_reset(&st->prot, st->enc.last_count);
+    }
+    return 0;
+}
+
+/* Flux from the encoder angle for a surface-magnet motor, and every flux-based
+ * estimator aligned with it. */
+static void track_encoder(ctl *c, const clarke_out *i)
+{
+    const ctl_cfg *k = &c->cfg;
+    ctl_state *st = &c->st;
+    float s, co;
+    fm_sincos(st->enc.theta_e_rad, &s, &co);
+    float pa = k->magnet_flux_wb * co + k->stator_inductance_h * i->i_alpha_a;
+    float pb = k->magnet_flux_wb * s + k->stator_inductance_h * i->i_beta_a;
+    fluxobs_reset(&st->flux, pa, pb, i->i_alpha_a, i->i_beta_a);
+    float theta = fm_atan2(pb, pa);
+    float speed_e = st->enc.speed_rad_s * k->pole_pairs;
+    conv_reset(&st->conv, theta, speed_e);
+    ekf_reset(&st->ekf, theta, speed_e);
+}
+
+static float clamp_abs(float v, float lim) { return v > lim ? lim : (v < -lim ? -lim : v); }
+
+uint8_t ctl_step(ctl *c, const hil_sample *s, hil_telemetry *tm)
+{
+    const ctl_cfg *k = &c->cfg;
+    ctl_state *st = &c->st;
+
+    clarke_out i;
+    clarke_from_adc(&k->clarke, s->adc_i1, s->adc_i2, &i);
+    float vdc_v = ((float)s->adc_vdc - k->vdc_offset_counts) * k->vdc_v_per_count;
+
+    uint8_t fresh = !st->started;
+    if (fresh) {
+        enc_reset(&k->enc, &st->enc, s->encoder);
+        prot_reset(&st->prot, s->encoder);
+        st->started = 1u;
+    } else {
+        enc_step(&k->enc, &st->enc, s->encoder);
+    }
+
+    uint8_t running = st->state == HIL_STATE_RUNNING;
+    if (running && !fresh) {
+        float ua, ub;
+        vsi_voltage(st->gates_prev, vdc_v, &ua, &ub);
+        fluxobs_step(&k->flux, &st->flux, ua, ub, i.i_alpha_a, i.i_beta_a);
+    } else {
+        track_encoder(c, &i);
+    }
+    float pa = st->flux.psi_alpha_wb;
+    float pb = st->flux.psi_beta_wb;
+    float mag = flux_magnitude(pa, pb);                                               /* eq. (5) */
+    float torque = torque_estimate(k->pole_pairs, pa, pb, i.i_alpha_a, i.i_beta_a); /* eq. (6) */
+    float theta_s = fm_atan2(pb, pa);                                                 /* eq. (10) */
+    conv_step(&k->conv, &st->conv, theta_s);
+    float inv_mag = mag > 1e-9f ? 1.0f / mag : 0.0f;
+    ekf_step(&k->ekf, &st->ekf, pa * inv_mag, pb * inv_mag);
+    float delta = rotor_load_angle(&k->rotor, torque, mag);
+
+    float ip = k->inv_pole_pairs;
+    float speed_raw = st->conv.speed_raw_rad_s * ip;
+    float speed_lpf = st->conv.speed_lpf_rad_s * ip;
+    float speed_ekf = st->ekf.speed_rad_s * ip;
+    float speed_enc = st->enc.speed_rad_s;
+    uint8_t source = c->cmd.speed_source;
+    float feedback = source == HIL_SPEED_ENCODER ? speed_enc : (source == HIL_SPEED_CONVENTIONAL ? speed_lpf : speed_ekf);
+
+    uint8_t gates = 0u;
+    uint8_t sector = 0u;
+    float torque_ref = 0.0f;
+    if (running) {
+        float value = 0.0f;
+        uint8_t fault = prot_hardware(&k->prot, i.i_peak_a, vdc_v, s->status, &value);
+        if (fault == PROT_FAULT_NONE) {
+            fault = prot_encoder_loss(&k->prot, &st->prot, s->encoder, speed_ekf, source == HIL_SPEED_ENCODER, &value);
+        }
+        if (fault != PROT_FAULT_NONE) {
+            st->state = HIL_STATE_FAULT;
+            st->fault_code = fault;
+            st->fault_value = value;
+            st->fault_period = s->period;
+        } else {
+            if (c->cmd.torque_mode) {
+                torque_ref = clamp_abs(c->cmd.torque_ref_nm, k->pi.torque_limit_nm);
+                st->pi.integral_nm = torque_ref; /* bumpless return to speed mode */
+            } else {
+                torque_ref = spi_step(&k->pi, &st->pi, c->cmd.speed_ref_rad_s, feedback);
+            }
+            float flux_ref = c->cmd.flux_ref_wb > 0.0f ? c->cmd.flux_ref_wb : c->params.flux_ref_wb;
+            uint8_t flux_up = hyst_step(&k->flux_hyst, &st->flux_hyst, flux_ref, mag);
+            uint8_t torque_up = hyst_step(&k->torque_hyst, &st->torque_hyst, torque_ref, torque);
+            sector = swtab_sector(pa, pb);
+            gates = vsi_gates_of_vector(swtab_vector(sector, flux_up, torque_up));
+        }
+    }
+    st->gates_prev = gates;
+
+    tm->period = s->period;
+    tm->sector = sector;
+    tm->speed_source = source;
+    tm->state = st->state;
+    tm->gates = gates;
+    tm->speed_feedback_rad_s = feedback;
+    tm->speed_encoder_rad_s = speed_enc;
+    tm->speed_raw_rad_s = speed_raw;
+    tm->speed_lpf_rad_s = speed_lpf;
+    tm->speed_ekf_rad_s = speed_ekf;
+    tm->flux_angle_rad = theta_s;
+    tm->ekf_angle_rad = st->ekf.theta_filtered_rad;
+    tm->flux_mag_wb = mag;
+    tm->torque_est_nm = torque;
+    tm->torque_ref_nm = torque_ref;
+    tm->rotor_pos_conv_rad = fm_wrap_pi(theta_s - delta);                    /* eq. (26) */
+    tm->rotor_pos_ekf_rad = fm_wrap_pi(st->ekf.theta_filtered_rad - delta); /* eq. (26) */
+    return gates;
+}
+
+/* ---- parameters by id ---- */
+
+typedef enum { PT_F32, PT_U8, PT_U16, PT_U32 } param_type;
+
+typedef struct {
+    uint16_t id;
+    uint8_t type;
+    uint8_t integer; /* value must be a whole number */
+    uint16_t offset; /* in ctl_params */
+    float min;
+    float max;
+} param_desc;
+
+#define P(id, field, type, integer, lo, hi) {(id), (type), (integer), (uint16_t)offsetof(ctl_params, field), (lo), (hi)}
+
+static const param_desc param_table[] = {
+    P(HIL_PARAM_CONTROL_PERIOD_S, control_period_s, PT_F32, 0, 1e-6f, 1e-2f),
+    P(HIL_PARAM_CURRENT_A_PER_COUNT, current_a_per_count, PT_F32, 0, 1e-6f, 10.0f),
+    P(HIL_PARAM_CURRENT_OFFSET_COUNTS, current_offset_counts, PT_F32, 0, 0.0f, 65535.0f),
+    P(HIL_PARAM_VDC_V_PER_COUNT, vdc_v_per_count, PT_F32, 0, 1e-6f, 10.0f),
+    P(HIL_PARAM_VDC_OFFSET_COUNTS, vdc_offset_counts, PT_F32, 0, -65535.0f, 65535.0f),
+    P(HIL_PARAM_ENCODER_COUNTS_PER_REV, encoder_counts_per_rev, PT_F32, 1, 4.0f, 65536.0f),
+    P(HIL_PARAM_CURRENT_PHASES, current_phases, PT_U8, 1, 0.0f, 2.0f),
+    P(HIL_PARAM_POLE_PAIRS, pole_pairs, PT_F32, 1, 1.0f, 64.0f),
+    P(HIL_PARAM_STATOR_RESISTANCE_OHM, stator_resistance_ohm, PT_F32, 0, 0.0f, 100.0f),
+    P(HIL_PARAM_STATOR_INDUCTANCE_H, stator_inductance_h, PT_F32, 0, 1e-7f, 10.0f),
+    P(HIL_PARAM_MAGNET_FLUX_WB, magnet_flux_wb, PT_F32, 0, 1e-6f, 10.0f),
+    P(HIL_PARAM_FLUX_REF_WB, flux_ref_wb, PT_F32, 0, 1e-6f, 10.0f),
+    P(HIL_PARAM_FLUX_BAND_WB, flux_band_wb, PT_F32, 0, 0.0f, 1.0f),
+    P(HIL_PARAM_TORQUE_BAND_NM, torque_band_nm, PT_F32, 0, 0.0f, 1000.0f),
+    P(HIL_PARAM_TORQUE_LIMIT_NM, torque_limit_nm, PT_F32, 0, 0.0f, 1000.0f),
+    P(HIL_PARAM_SPEED_KP_NM_PER_RAD_S, speed_kp_nm_per_rad_s, PT_F32, 0, 0.0f, 1000.0f),
+    P(HIL_PARAM_SPEED_KI_NM_PER_RAD, speed_ki_nm_per_rad, PT_F32, 0, 0.0f, 1e6f),
+    P(HIL_PARAM_SPEED_LPF_CUTOFF_HZ, speed_lpf_cutoff_hz, PT_F32, 0, 1e-3f, 1e5f),
+    P(HIL_PARAM_EKF_K1, ekf_k1, PT_F32, 0, 0.0f, 1.0f),
+    P(HIL_PARAM_EKF_K2, ekf_k2_rad_s, PT_F32, 0, 0.0f, 1e5f),
+    P(HIL_PARAM_EKF_K3, ekf_k3_rad_s, PT_F32, 0, 0.0f, 1e4f),
+    P(HIL_PARAM_FLUX_DRIFT_CUTOFF_HZ, flux_drift_cutoff_hz, PT_F32, 0, 0.0f, 100.0f),
+    P(HIL_PARAM_TELEMETRY_DIVIDER, telemetry_divider, PT_U32, 1, 0.0f, 1e6f),
+    P(HIL_PARAM_OVERCURRENT_A, overcurrent_a, PT_F32, 0, 0.0f, 1e4f),
+    P(HIL_PARAM_ENCODER_LOSS_TIMEOUT_S, encoder_loss_timeout_s, PT_F32, 0, 1e-4f, 100.0f),
+};
+
+#undef P
+
+static const param_desc *find_param(uint16_t id)
+{
+    for (size_t n = 0; n < sizeof param_table / sizeof param_table[0]; ++n) {
+        if (param_table[n].id == id) {
+            return &param_table[n];
+        }
+    }
+    return NULL;
+}
+
+static float read_field(const ctl_params *p, const param_desc *d)
+{
+    const unsigned char *base = (const unsigned char *)p + d->offset;
+    switch (d->type) {
+    case PT_U8:
+        return (float)*(const uint8_t *)base;
+    case PT_U16:
+        return (float)*(const uint16_t *)(const void *)base;
+    case PT_U32:
+        return (float)*(const uint32_t *)(const void *)base;
+    default:
+        return *(const float *)(const void *)base;
+    }
+}
+
+static void write_field(ctl_params *p, const param_desc *d, float value)
+{
+    unsigned char *base = (unsigned char *)p + d->offset;
+    switch (d->type) {
+    case PT_U8:
+        *(uint8_t *)base = (uint8_t)value;
+        break;
+    case PT_U16:
+        *(uint16_t *)(void *)base = (uint16_t)value;
+        break;
+    case PT_U32:
+        *(uint32_t *)(void *)base = (uint32_t)value;
+        break;
+    default:
+        *(float *)(void *)base = value;
+        break;
+    }
+}
+
+uint8_t ctl_param_get(const ctl *c, uint16_t id, float *value)
+{
+    if (id == HIL_PARAM_CONTROL_STEP_CYCLES) {
+        *value = (float)c->st.step_cycles;
+        return HIL_PARAM_OK;
+    }
+    const param_desc *d = find_param(id);
+    if (d == NULL) {
+        *value = 0.0f;
+        return HIL_PARAM_UNKNOWN;
+    }
+    *value = read_field(&c->params, d);
+    return HIL_PARAM_OK;
+}
+
+uint8_t ctl_param_set(ctl *c, uint16_t id, float value, float *value_now)
+{
+    uint8_t status = ctl_param_get(c, id, value_now);
+    if (status != HIL_PARAM_OK) {
+        return status;
+    }
+    if (id == HIL_PARAM_CONTROL_STEP_CYCLES) {
+        return HIL_PARAM_READ_ONLY;
+    }
+    const param_desc *d = find_param(id);
+    /* written so that NaN fails every comparison and is refused */
+    int in_range = value >= d->min && value <= d->max;
+    if (in_range && d->integer) {
+        in_range = (float)(int32_t)value == value;
+    }
+    if (!in_range) {
+        return HIL_PARAM_OUT_OF_RANGE;
+    }
+    write_field(&c->params, d, value);
+    ctl_derive(c);
+    *value_now = read_field(&c->params, d);
+    return HIL_PARAM_OK;
+}

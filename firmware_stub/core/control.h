@@ -1,0 +1,138 @@
+/*
+ * The control step of the DTC drive of Fig. 3: one SAMPLE in, gates and
+ * telemetry out. All three speed sources (encoder, conventional eq. (10)-(11)
+ * with low-pass filter, simplified EKF eq. (16)-(23)) run every step side by
+ * side; the COMMAND picks the one that closes the speed loop.
+ *
+ * No I/O, no allocation: the caller owns the ctl struct. Start-up: while not
+ * running, the flux observer is re-initialised every step from the encoder
+ * angle, psi = psi_f (cos theta_e, sin theta_e) + Ls i (exact for a
+ * surface-magnet motor), and the EKF tracks it, so all estimators are warm when
+ * the drive is enabled. The paper does not describe start-up; a sensorless
+ * board would use an alignment or injection method instead.
+ */
+#ifndef CONTROL_H
+#define CONTROL_H
+
+#include <stdint.h>
+
+#include "../../protocol/c/hil_proto.h"
+#include "clarke.h"
+#include "flux_observer.h"
+#include "hysteresis.h"
+#include "protection.h"
+#include "rotor_position.h"
+#include "speed_conventional.h"
+#include "speed_ekf.h"
+#include "speed_encoder.h"
+#include "speed_pi.h"
+#include "switching_table.h"
+#include "vsi.h"
+
+/* Everything the bench can set with PARAM_SET (SI units), plus two values that
+ * are not on the wire (last two). */
+typedef struct {
+    float control_period_s;
+    float current_a_per_count;
+    float current_offset_counts;
+    float vdc_v_per_count;
+    float vdc_offset_counts;
+    float encoder_counts_per_rev;
+    uint8_t current_phases; /* clarke_phases */
+    float pole_pairs;
+    float stator_resistance_ohm;
+    float stator_inductance_h;
+    float magnet_flux_wb;
+    float flux_ref_wb;
+    float flux_band_wb;
+    float torque_band_nm;
+    float torque_limit_nm;
+    float speed_kp_nm_per_rad_s;
+    float speed_ki_nm_per_rad;
+    float speed_lpf_cutoff_hz;
+    float ekf_k1;
+    float ekf_k2_rad_s;
+    float ekf_k3_rad_s;
+    float flux_drift_cutoff_hz;
+    uint32_t telemetry_divider; /* TELEMETRY every N SAMPLEs, 0 = never */
+    float overcurrent_a;
+    float encoder_loss_timeout_s;
+    float encoder_loss_min_speed_rad_s;
+    uint16_t encoder_window_periods;
+} ctl_params;
+
+/* Block configurations derived from ctl_params by ctl_derive(). */
+typedef struct {
+    clarke_cfg clarke;
+    fluxobs_cfg flux;
+    hyst_cfg flux_hyst;
+    hyst_cfg torque_hyst;
+    spi_cfg pi;
+    enc_cfg enc;
+    conv_cfg conv;
+    ekf_cfg ekf;
+    rotor_cfg rotor;
+    prot_cfg prot;
+    float vdc_v_per_count;
+    float vdc_offset_counts;
+    float pole_pairs;
+    float inv_pole_pairs;
+    float magnet_flux_wb;
+    float stator_inductance_h;
+} ctl_cfg;
+
+typedef struct {
+    uint8_t enable;
+    uint8_t torque_mode;
+    uint8_t speed_source; /* hil_speed_source */
+    float speed_ref_rad_s; /* mechanical */
+    float torque_ref_nm;
+    float flux_ref_wb; /* <= 0: use params.flux_ref_wb */
+} ctl_command;
+
+typedef struct {
+    fluxobs_state flux;
+    hyst_state flux_hyst;
+    hyst_state torque_hyst;
+    spi_state pi;
+    enc_state enc;
+    conv_state conv;
+    ekf_state ekf;
+    prot_state prot;
+    uint8_t started;    /* first SAMPLE seen */
+    uint8_t gates_prev; /* applied during the period that just ended */
+    uint8_t state;      /* hil_state */
+    uint8_t fault_code; /* hil_fault_code latched */
+    float fault_value;
+    uint32_t fault_period;
+    uint32_t step_cycles; /* set by the board layer (SysTick), read by PARAM_GET */
+} ctl_state;
+
+typedef struct {
+    ctl_params params;
+    ctl_cfg cfg;
+    ctl_command cmd;
+    ctl_state st;
+} ctl;
+
+void ctl_params_default(ctl_params *p);
+/* Defaults, derived configuration, IDLE state. */
+void ctl_init(ctl *c);
+/* Recomputes every block configuration from c->params; call after changing them. */
+void ctl_derive(ctl *c);
+
+/* Applies a COMMAND. Enabling from IDLE starts switching at the next step;
+ * clearing ENABLE stops switching and clears a latched fault. Returns 0, or -1
+ * (command ignored) for an unknown speed source. */
+int ctl_set_command(ctl *c, const hil_command *cmd);
+
+/* One control period. Returns the gates to apply until the next SAMPLE and
+ * fills *tm (every field, every step). */
+uint8_t ctl_step(ctl *c, const hil_sample *s, hil_telemetry *tm);
+
+/* PARAM_SET / PARAM_GET by hil_param_id. Return a hil_param_status; *value is
+ * the value now in force (the old one when the set is refused). */
+uint8_t ctl_param_set(ctl *c, uint16_t id, float value, float *value_now);
+uint8_t ctl_param_get(const ctl *c, uint16_t id, float *value);
+
+#endif

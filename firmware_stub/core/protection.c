@@ -1,0 +1,37 @@
+#include "protection.h"
+
+void prot_reset(prot_state *st, uint16_t count)
+{
+    st->frozen_s = 0.0f;
+    st->last_count = count;
+}
+
+uint8_t prot_hardware(const prot_cfg *cfg, float i_peak_a, float vdc_v, uint8_t status_bits, float *value)
+{
+    if (i_peak_a > cfg->overcurrent_a || (status_bits & (PROT_STATUS_OVERCURRENT | PROT_STATUS_GATE_FAULT))) {
+        *value = i_peak_a;
+        return PROT_FAULT_OVERCURRENT;
+    }
+    if (status_bits & PROT_STATUS_OVERVOLTAGE) {
+        *value = vdc_v;
+        return PROT_FAULT_DC_LINK;
+    }
+    return PROT_FAULT_NONE;
+}
+
+uint8_t prot_encoder_loss(const prot_cfg *cfg, prot_state *st, uint16_t count, float flux_speed_rad_s,
+                          int encoder_selected, float *value)
+{
+    float speed = flux_speed_rad_s < 0.0f ? -flux_speed_rad_s : flux_speed_rad_s;
+    if (!encoder_selected || count != st->last_count || speed < cfg->encoder_loss_min_speed_rad_s) {
+        st->frozen_s = 0.0f;
+        st->last_count = count;
+        return PROT_FAULT_NONE;
+    }
+    st->frozen_s += cfg->control_period_s;
+    if (st->frozen_s > cfg->encoder_loss_timeout_s) {
+        *value = flux_speed_rad_s;
+        return PROT_FAULT_ENCODER_LOSS;
+    }
+    return PROT_FAULT_NONE;
+}

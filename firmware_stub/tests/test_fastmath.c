@@ -1,0 +1,100 @@
+/* fm_sincos, fm_atan2, fm_wrap_pi against libm in double precision. */
+#include "check.h"
+#include "fastmath.h"
+
+static void sincos_error_bound(void **state)
+{
+    (void)state;
+    double worst = 0.0;
+    for (int n = -400000; n <= 400000; ++n) {
+        float th = (float)(4.0 * PI_D * n / 400000.0);
+        float s, c;
+        fm_sincos(th, &s, &c);
+        double es = fabs((double)s - sin((double)th));
+        double ec = fabs((double)c - cos((double)th));
+        worst = fmax(worst, fmax(es, ec));
+    }
+    if (!(worst <= FM_SINCOS_MAX_ERR)) {
+        fail_msg("sincos worst error %.3g above bound %.3g", worst, (double)FM_SINCOS_MAX_ERR);
+    }
+    /* the bound is not loose by orders of magnitude */
+    assert_true(worst > 1e-8);
+}
+
+static void sincos_quadrants_exact_points(void **state)
+{
+    (void)state;
+    float s, c;
+    fm_sincos(0.0f, &s, &c);
+    assert_true(s == 0.0f && c == 1.0f);
+    fm_sincos(FM_HALF_PI, &s, &c);
+    assert_near(s, 1.0, 1e-7);
+    assert_near(c, 0.0, 1e-7);
+    fm_sincos(-FM_PI, &s, &c);
+    assert_near(s, 0.0, 1e-7);
+    assert_near(c, -1.0, 1e-7);
+    fm_sincos(-3.0f * FM_HALF_PI, &s, &c);
+    assert_near(s, 1.0, 1e-7);
+}
+
+static void atan2_error_bound(void **state)
+{
+    (void)state;
+    double worst = 0.0;
+    uint32_t seed = 12345u;
+    for (int n = 0; n < 400000; ++n) {
+        double th = -PI_D + 2.0 * PI_D * n / 400000.0;
+        double r = exp(check_uniform(&seed, -12.0, 8.0));
+        float y = (float)(r * sin(th));
+        float x = (float)(r * cos(th));
+        double ref = atan2((double)y, (double)x);
+        double got = (double)fm_atan2(y, x);
+        double e = fabs(got - ref);
+        if (e > PI_D) {
+            e = fabs(e - 2.0 * PI_D); /* +-pi on the negative x axis */
+        }
+        worst = fmax(worst, e);
+    }
+    if (!(worst <= FM_ATAN2_MAX_ERR)) {
+        fail_msg("atan2 worst error %.3g above bound %.3g", worst, (double)FM_ATAN2_MAX_ERR);
+    }
+    assert_true(worst > 1e-8);
+}
+
+static void atan2_axes_and_origin(void **state)
+{
+    (void)state;
+    assert_true(fm_atan2(0.0f, 0.0f) == 0.0f);
+    assert_near(fm_atan2(0.0f, 1.0f), 0.0, 1e-7);
+    assert_near(fm_atan2(1.0f, 0.0f), PI_D / 2, 1e-6);
+    assert_near(fm_atan2(-1.0f, 0.0f), -PI_D / 2, 1e-6);
+    assert_near(fm_atan2(0.0f, -1.0f), PI_D, 1e-6);
+    assert_near(fm_atan2(1.0f, 1.0f), PI_D / 4, 1e-6);
+    assert_near(fm_atan2(-1.0f, -1.0f), -3 * PI_D / 4, 1e-6);
+}
+
+static void wrap_into_range(void **state)
+{
+    (void)state;
+    assert_near(fm_wrap_pi(0.5f), 0.5, 0.0);
+    assert_near(fm_wrap_pi(FM_PI + 0.25f), -PI_D + 0.25, 1e-6);
+    assert_near(fm_wrap_pi(-FM_PI - 0.25f), PI_D - 0.25, 1e-6);
+    assert_near(fm_wrap_pi(7.0f * FM_TWO_PI + 1.0f), 1.0, 1e-5);
+    assert_near(fm_wrap_pi(-1000.0f), remainder(-1000.0, 2 * PI_D), 1e-4);
+    for (int n = -2000; n <= 2000; ++n) {
+        float w = fm_wrap_pi(0.37f * (float)n);
+        assert_true(w >= -FM_PI && w <= FM_PI);
+    }
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(sincos_error_bound),
+        cmocka_unit_test(sincos_quadrants_exact_points),
+        cmocka_unit_test(atan2_error_bound),
+        cmocka_unit_test(atan2_axes_and_origin),
+        cmocka_unit_test(wrap_into_range),
+    };
+    return cmocka_run_group_tests_name("fastmath", tests, NULL, NULL);
+}

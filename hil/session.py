@@ -1,0 +1,400 @@
+"""A bench session: a plant, a board on a link, a clock and a log.
+
+The session is the only place where periods happen. Per period, in lockstep:
+the plant's sensors are sampled at t_k and sent as SAMPLE k; the board's GATES k
+is awaited (for ``answer_timeout_s`` of wall time); the plant integrates
+[t_k, t_k+1] with it (holding the previous gates when none came). Everything
+that crossed is recorded in memory (for checks) and in the MCAP log.
+
+Teardown always runs (OpenHTF's lesson): whatever ends a run — its end, a
+failed check, a dead board, Ctrl-C — the inverter goes to its safe state
+(all switches off, the motor coasts through the diodes), SHUTDOWN is sent, the
+board's process is stopped and the log is closed readable.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any, Callable
+
+from plant_rt import Plant, TRUTH_FIELDS
+from protocol.messages import (
+    PROTOCOL_VERSION, Command, Fault, Gates, Duty, Hello, ParamGet, ParamId, ParamSet,
+    ParamValue, Role, Sample, Shutdown, SpeedSource, Status, Telemetry,
+)
+
+from hil.bench_links import BoardConnection, connect
+from hil.board_params import board_parameters
+from hil.recorder import COMMAND_FIELDS, Recorder
+
+RPM_PER_RAD_S = 60.0 / (2.0 * math.pi)
+
+
+class SessionError(RuntimeError):
+    """The bench or the board failed: the run ends with ERROR and this reason."""
+
+
+@dataclass
+class SessionConfig:
+    link: str = "stub"
+    mode: str = "lockstep"                  # lockstep | realtime
+    log_path: Path | None = None
+    seed: int = 0
+    # Consecutive periods without a GATES answer before the watchdog safe-states the plant.
+    watchdog_periods: int = 20
+    hello_timeout_s: float | None = None    # None: the link's own default
+    answer_timeout_s: float | None = None
+    realtime_period_s: float | None = None  # None: the profile's control period
+    realtime_miss_budget: int = 1000        # deadline misses before a realtime run ends in ERROR
+    log_full_rate: bool = True
+    metadata: dict[str, dict[str, str]] = field(default_factory=dict)
+
+
+@dataclass
+class CommandState:
+    """What the bench has asked the board to do, in engineering units."""
+
+    enable: bool = False
+    speed_source: str = "encoder"   # encoder | conventional | ekf
+    speed_ref_rpm: float = 0.0
+    torque_mode: bool = False
+    torque_ref_nm: float = 0.0
+    flux_ref_wb: float = 0.0        # 0: the board's PARAM flux_ref_wb
+
+    def to_message(self, default_flux_wb: float) -> Command:
+        flags = (1 if self.enable else 0) | (2 if self.torque_mode else 0)
+        source = {"encoder": SpeedSource.ENCODER, "conventional": SpeedSource.CONVENTIONAL,
+                  "ekf": SpeedSource.EKF}[self.speed_source]
+        return Command(flags=flags, speed_source=int(source),
+                       speed_ref_rad_s=self.speed_ref_rpm / RPM_PER_RAD_S,
+                       torque_ref_nm=self.torque_ref_nm,
+                       flux_ref_wb=self.flux_ref_wb or default_flux_wb)
+
+    def row(self) -> tuple:
+        source = ("encoder", "conventional", "ekf").index(self.speed_source)
+        return (float(self.enable), float(source), self.speed_ref_rpm, float(self.torque_mode),
+                self.torque_ref_nm, self.flux_ref_wb)
+
+
+class BenchSession:
+    """Plant + board + clock + log. Use as a context manager; ``close`` always runs."""
+
+    def __init__(self, profile, config: SessionConfig | None = None,
+                 on_period: Callable[[int], None] | None = None):
+        self.profile = profile
+        self.config = config or SessionConfig()
+        self.plant = Plant(profile, seed=self.config.seed)
+        self.period_s = profile.control_period_s
+        self.command_state = CommandState()
+        self.recorder = Recorder(self.period_s)
+        self.conn: BoardConnection | None = None
+        self.log = None
+        self.board_hello: Hello | None = None
+        self.board_params: dict[str, float] = {}
+        self.faults: list[Fault] = []
+        self.events: list[tuple[float, str, dict]] = []
+        self.missed_answers = 0
+        self.consecutive_misses = 0
+        self.stale_answers = 0
+        self.error: str | None = None
+        self.on_period = on_period
+        self._gates = 0
+        self._closed = False
+        self._mailbox = None
+        self.rt_stats: dict[str, Any] = {}
+
+    # ----------------------------------------------------------------- setup
+    def __enter__(self) -> "BenchSession":
+        try:
+            self.start()
+        except BaseException:
+            self.close()
+            raise
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        self.close(reason=None if exc is None else f"{exc_type.__name__}: {exc}")
+
+    def start(self) -> None:
+        cfg = self.config
+        if cfg.log_path is not None:
+            from hil.mcap_log import McapLog
+
+            self.log = McapLog(cfg.log_path, metadata=self._metadata())
+            self.recorder.attach_log(self.log)
+        self.conn = connect(cfg.link)
+        if cfg.hello_timeout_s is not None:
+            self.conn.hello_timeout_s = cfg.hello_timeout_s
+        if cfg.answer_timeout_s is not None:
+            self.conn.answer_timeout_s = cfg.answer_timeout_s
+        self._handshake()
+        self._push_parameters(board_parameters(self.profile))
+        self.send_command()
+
+    def _metadata(self) -> dict[str, dict[str, str]]:
+        import platform
+        import hil
+
+        meta = {
+            "bench": {"hil_bench_version": hil.__version__, "python": platform.python_version(),
+                      "machine": platform.machine(), "link": self.config.link,
+                      "mode": self.config.mode, "seed": str(self.config.seed),
+                      "protocol_version": str(PROTOCOL_VERSION)},
+            "profile": {k: str(v) for k, v in _flatten(self.profile.as_dict()).items()},
+        }
+        meta.update(self.config.metadata)
+        return meta
+
+    def _await(self, predicate: Callable[[Any], bool], timeout_s: float, what: str):
+        """Receives until a message satisfies predicate; other messages are dispatched."""
+        link = self.conn.link
+        deadline = time.monotonic() + timeout_s
+        while True:
+            remaining = deadline - time.monotonic()
+            msg = link.recv(max(remaining, 0.0))
+            if msg is not None:
+                if predicate(msg):
+                    return msg
+                self._dispatch(msg)
+                continue
+            if remaining <= 0:
+                if not self.conn.board_alive():
+                    raise SessionError(f"board on '{self.config.link}' exited with status "
+                                       f"{self.conn.board_exit_status()} while waiting for {what}")
+                raise SessionError(f"no {what} from the board on '{self.config.link}' within "
+                                   f"{timeout_s:g} s")
+
+    def _handshake(self) -> None:
+        link = self.conn.link
+        link.send(Hello(proto_version=PROTOCOL_VERSION, role=int(Role.BENCH), capabilities=0,
+                        control_period_ns=round(self.period_s * 1e9), name_len=len(b"hil-bench"),
+                        name=b"hil-bench"))
+        hello = self._await(lambda m: isinstance(m, Hello), self.conn.hello_timeout_s, "HELLO")
+        if hello.proto_version != PROTOCOL_VERSION:
+            raise SessionError(
+                f"board on '{self.config.link}' speaks protocol version {hello.proto_version}, "
+                f"the bench speaks version {PROTOCOL_VERSION}")
+        self.board_hello = hello
+        self._event("hello", {"board": _name(hello), "proto_version": hello.proto_version,
+                              "capabilities": hello.capabilities,
+                              "control_period_ns": hello.control_period_ns})
+
+    def _push_parameters(self, params: dict[str, float]) -> None:
+        for name, value in params.items():
+            self.param_set(name, value)
+
+    def param_set(self, name: str, value: float) -> float:
+        """PARAM_SET then PARAM_GET: returns the value the board reads back (float32)."""
+        pid = ParamId[name.upper()]
+        link = self.conn.link
+        link.send(ParamSet(id=int(pid), value=float(value)))
+        answer = self._await(lambda m: isinstance(m, ParamValue) and m.id == pid,
+                             self.conn.hello_timeout_s, f"PARAM_VALUE for {name}")
+        if answer.status != 0:
+            raise SessionError(f"board refused parameter {name} = {value:g} "
+                               f"(status {answer.status}: {_param_status(answer.status)})")
+        link.send(ParamGet(id=int(pid)))
+        readback = self._await(lambda m: isinstance(m, ParamValue) and m.id == pid,
+                               self.conn.hello_timeout_s, f"PARAM_VALUE readback of {name}")
+        if not math.isclose(readback.value, value, rel_tol=1e-6, abs_tol=1e-12):
+            raise SessionError(f"parameter {name}: set {value!r}, board reads back {readback.value!r}")
+        self.board_params[name] = readback.value
+        self._event("param", {"name": name, "value": readback.value})
+        return readback.value
+
+    # -------------------------------------------------------------- commands
+    def send_command(self, **changes: Any) -> None:
+        """Updates the command state (engineering units) and sends COMMAND."""
+        unknown = set(changes) - set(COMMAND_FIELDS)
+        if unknown:
+            raise ValueError(f"unknown command field(s): {', '.join(sorted(unknown))}")
+        self.command_state = replace(self.command_state, **changes)
+        msg = self.command_state.to_message(self.board_params.get("flux_ref_wb", 0.0))
+        self.conn.link.send(msg)
+        self.recorder.command(self.plant.period, self.command_state.row())
+        self._event("command", dict(changes))
+
+    @property
+    def board_name(self) -> str:
+        return _name(self.board_hello) if self.board_hello is not None else ""
+
+    def _event(self, kind: str, data: dict) -> None:
+        t = self.plant.period * self.period_s
+        self.events.append((t, kind, data))
+        if self.log is not None:
+            self.log.write_json("/plan/events", round(t * 1e9), {"t_s": t, "kind": kind, **_jsonable(data)})
+
+    def event(self, kind: str, **data: Any) -> None:
+        """Records a plan event (stimulus, mark, fault) in the event list and the log."""
+        self._event(kind, data)
+
+    # ----------------------------------------------------------- dispatching
+    def _dispatch(self, msg) -> None:
+        t = type(msg)
+        if t is Telemetry:
+            self.recorder.telemetry(msg)
+        elif t is Fault:
+            self.faults.append(msg)
+            self._event("board_fault", {"code": msg.code, "period": msg.period, "value": msg.value})
+        elif t is Status:
+            self._event("board_status", {"state": msg.state, "fault_code": msg.fault_code,
+                                         "period": msg.period})
+        elif t is Gates or t is Duty:
+            self.stale_answers += 1
+        # HEARTBEAT, late PARAM_VALUEs: nothing to do beyond the raw-frame log
+
+    # --------------------------------------------------------------- running
+    def run_periods(self, count: int, stop: Callable[[], bool] | None = None) -> int:
+        """Advances up to ``count`` periods (lockstep or real time); returns how many ran."""
+        if self.config.mode == "realtime":
+            from hil.realtime import run_realtime
+
+            return run_realtime(self, count, stop)
+        return self._run_lockstep(count, stop)
+
+    def _run_lockstep(self, count: int, stop: Callable[[], bool] | None) -> int:
+        plant = self.plant
+        link = self.conn.link
+        recorder = self.recorder
+        dispatch = self._dispatch
+        answer_timeout = self.conn.answer_timeout_s
+        watchdog = self.config.watchdog_periods
+        mailbox = self._mailbox
+        on_period = self.on_period
+        for done in range(count):
+            if mailbox is not None and mailbox.pending:
+                self._apply_mailbox(mailbox)
+            sample = plant.sample()
+            k = sample.period
+            link.send(Sample(k, sample.adc_i1, sample.adc_i2, sample.adc_vdc, sample.encoder,
+                             sample.status))
+            recorder.period(k, plant.truth(), sample)
+            gates = None
+            msg = link.recv(answer_timeout)
+            while msg is not None:
+                if type(msg) is Gates:
+                    if msg.period == k:
+                        gates = msg.gates
+                        break
+                    self.stale_answers += 1
+                else:
+                    dispatch(msg)
+                msg = link.recv(answer_timeout)
+            if gates is None:
+                self.missed_answers += 1
+                self.consecutive_misses += 1
+                if self.consecutive_misses >= watchdog:
+                    plant.safe_state()
+                    alive = self.conn.board_alive()
+                    why = ("the board process exited with status "
+                           f"{self.conn.board_exit_status()}" if not alive else
+                           f"no GATES for {self.consecutive_misses} consecutive periods")
+                    self.error = f"watchdog at period {k} (t = {k * self.period_s:.6f} s): {why}"
+                    self._event("watchdog", {"period": k, "reason": why})
+                    raise SessionError(self.error)
+                plant.step(None)
+            else:
+                self.consecutive_misses = 0
+                plant.step(gates)
+            if on_period is not None:
+                on_period(k)
+            if stop is not None and stop():
+                return done + 1
+        return count
+
+    def drain(self) -> None:
+        """Collects what the board sent after the last GATES (its last TELEMETRY)."""
+        link = self.conn.link
+        wait_s = min(self.conn.answer_timeout_s, 0.05)
+        msg = link.recv(wait_s)
+        while msg is not None:
+            self._dispatch(msg)
+            msg = link.recv(wait_s)
+
+    def attach_mailbox(self, mailbox) -> None:
+        """Connects a Modbus control port's mailbox: requests are applied between periods."""
+        self._mailbox = mailbox
+
+    def _apply_mailbox(self, mailbox) -> None:
+        from hil.control_requests import apply_requests
+
+        apply_requests(self, mailbox.take_requests())
+
+    # -------------------------------------------------------------- teardown
+    def close(self, reason: str | None = None) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        errors = []
+        try:
+            self.plant.safe_state()
+        except Exception as exc:  # noqa: BLE001
+            errors.append(exc)
+        if self.conn is not None:
+            try:
+                self.conn.link.send(Shutdown())
+            except Exception:  # noqa: BLE001 - a dead board cannot be told to stop
+                pass
+            try:
+                self.conn.close()
+            except Exception as exc:  # noqa: BLE001
+                errors.append(exc)
+        if self.log is not None:
+            try:
+                if reason:
+                    self._event("session_end", {"reason": reason})
+                self.recorder.flush_log()
+                if self.conn is not None:
+                    self.log.write_json("/link/counters", round(self.plant.t_s * 1e9),
+                                        _jsonable(self.link_counters()))
+                self.log.close()
+            except Exception as exc:  # noqa: BLE001
+                errors.append(exc)
+        if errors and reason is None:
+            raise errors[0]
+
+    def link_counters(self) -> dict[str, Any]:
+        counters = dict(self.conn.link.counters) if self.conn is not None else {}
+        counters.update(missed_answers=self.missed_answers, stale_answers=self.stale_answers)
+        return counters
+
+
+def _name(hello: Hello) -> str:
+    name = hello.name
+    if isinstance(name, (bytes, bytearray)):
+        return bytes(name[: hello.name_len]).decode("utf-8", "replace")
+    return str(name)
+
+
+def _param_status(status: int) -> str:
+    return {1: "unknown parameter", 2: "out of range", 3: "read-only"}.get(status, "error")
+
+
+def _flatten(d: dict, prefix: str = "") -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for key, value in d.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, dict):
+            out.update(_flatten(value, name + "."))
+        else:
+            out[name] = value
+    return out
+
+
+def _jsonable(data: dict) -> dict:
+    out = {}
+    for key, value in data.items():
+        if isinstance(value, (bool, int, float, str)) or value is None:
+            out[key] = value
+        elif isinstance(value, (list, tuple)):
+            out[key] = [v if isinstance(v, (bool, int, float, str)) else str(v) for v in value]
+        elif isinstance(value, dict):
+            out[key] = _jsonable(value)
+        else:
+            out[key] = str(value)
+    return out
+
+
+__all__ = ["BenchSession", "SessionConfig", "SessionError", "CommandState", "TRUTH_FIELDS"]

@@ -1,0 +1,262 @@
+"""Two-level three-leg voltage-source inverter: gate commands to switch timing and leg states.
+
+Gate bits are protocol/c/hil_proto.h's HIL_GATE_*: per leg one high-side and one low-side
+switch. A leg with exactly one switch on ties its phase terminal to DC+ (H) or DC- (L); a leg
+with both off (dead time, or a command that opens it) conducts through its diodes according to
+the current direction, and carries no current once that current has reached zero; a leg with
+both on is a shoot-through, which the gate driver's desaturation protection answers by turning
+the leg off (it is then open and the sample's GATE_FAULT bit is set).
+
+With the star point floating, a complementary switching state (s_a s_b s_c) gives the paper's
+Table 2 vector u = 2/3 U_dc (s_a + s_b e^{j2pi/3} + s_c e^{j4pi/3}); V1(100) is A high, B low,
+C low.
+
+Timing within a control period [0, T): the command of the previous period holds until the
+computation delay, the new one after it. A duty command is a centre-aligned PWM period aligned
+with the control period (carrier valley at the sampling instant t_k): the high side of a leg is
+on during [T (1 - d)/2, T (1 + d)/2), the low side the rest of the period. Dead time delays
+every switch's turn-on edge by dead_time_s. The result is a list of intervals with a constant
+switch word, integrated one after the other (segment by segment, never averaged).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from plant_rt.spec import param
+
+GATE_A_HIGH = 0x01
+GATE_A_LOW = 0x02
+GATE_B_HIGH = 0x04
+GATE_B_LOW = 0x08
+GATE_C_HIGH = 0x10
+GATE_C_LOW = 0x20
+LEG_BITS = ((GATE_A_HIGH, GATE_A_LOW), (GATE_B_HIGH, GATE_B_LOW), (GATE_C_HIGH, GATE_C_LOW))
+
+#: Table 2 switching states (s_a s_b s_c), 1 = high side on, as gate words.
+VECTOR_GATES = {
+    "V0": 0x2A, "V1": 0x29, "V2": 0x25, "V3": 0x26, "V4": 0x16, "V5": 0x1A, "V6": 0x19, "V7": 0x15,
+}
+
+# Leg states within an interval.
+H, L, P, N, O = 0, 1, 2, 3, 4   # driven high, driven low, open with i > 0 / i < 0 / i == 0
+OPEN = (P, N, O)
+
+SQRT3 = math.sqrt(3.0)
+#: Unit phase axes in the stationary frame: i_x = e_x . i_alphabeta (amplitude-invariant).
+PHASE_AXES = ((1.0, 0.0), (-0.5, 0.5 * SQRT3), (-0.5, -0.5 * SQRT3))
+
+
+@dataclass(frozen=True)
+class InverterParams:
+    """Switching non-idealities; the defaults are the paper's ideal inverter."""
+
+    dead_time_s: float = param(0.0, ge=0)
+    device_drop_v: float = param(0.0, ge=0)
+    device_knee_a: float = param(0.1, gt=0)
+
+
+def leg_states(word: int) -> tuple[int, int, int]:
+    """Per leg H, L or O (O: both switches off, or both on and tripped by desaturation)."""
+    out = []
+    for hi, lo in LEG_BITS:
+        on_h, on_l = bool(word & hi), bool(word & lo)
+        out.append(H if on_h and not on_l else L if on_l and not on_h else O)
+    return out[0], out[1], out[2]
+
+
+def shoot_through(word: int) -> bool:
+    return any((word & hi) and (word & lo) for hi, lo in LEG_BITS)
+
+
+def driven_vector(word: int, vdc: float) -> tuple[float, float, float, float] | None:
+    """(u_alpha, u_beta, g_alpha, g_beta) for a word that drives all three legs, else None.
+
+    u is Table 2's voltage; g = sum of the axes of the legs tied to DC+, so the DC-link current
+    is g . i_alphabeta.
+    """
+    states = leg_states(word)
+    if any(s not in (H, L) for s in states):
+        return None
+    sa, sb, sc = (1.0 if s == H else 0.0 for s in states)
+    ga = sum(PHASE_AXES[x][0] for x in range(3) if states[x] == H)
+    gb = sum(PHASE_AXES[x][1] for x in range(3) if states[x] == H)
+    return (vdc * (2.0 * sa - sb - sc) / 3.0, vdc * (sb - sc) / SQRT3, ga, gb)
+
+
+class Command:
+    """A controller command: a gate word or three duty cycles. Immutable, comparable."""
+
+    __slots__ = ("gates", "duty")
+
+    def __init__(self, gates: int | None = None, duty: tuple[float, float, float] | None = None):
+        self.gates = gates
+        self.duty = duty
+
+    def __eq__(self, other: object) -> bool:
+        return (isinstance(other, Command) and self.gates == other.gates
+                and self.duty == other.duty)
+
+    def __hash__(self) -> int:
+        return hash((self.gates, self.duty))
+
+    def __repr__(self) -> str:
+        return f"Command(gates={self.gates!r})" if self.duty is None else f"Command(duty={self.duty!r})"
+
+    @staticmethod
+    def parse(gates: int | None, duty) -> "Command | None":
+        if gates is not None and duty is not None:
+            raise ValueError("step() takes gates or duty, not both")
+        if gates is not None:
+            if isinstance(gates, bool) or not isinstance(gates, int) or not 0 <= gates <= 0x3F:
+                raise ValueError(f"gates must be an int 0..0x3F of HIL_GATE_* bits, got {gates!r}")
+            return Command(gates=gates)
+        if duty is not None:
+            try:
+                values = tuple(float(d) for d in duty)
+            except (TypeError, ValueError):
+                raise ValueError(f"duty must be three numbers 0..1, got {duty!r}") from None
+            if len(values) != 3 or not all(0.0 <= d <= 1.0 for d in values):
+                raise ValueError(f"duty must be three numbers 0..1, got {duty!r}")
+            return Command(duty=values)
+        return None
+
+    def edges(self, switch: int, period_s: float) -> tuple[bool, tuple[float, ...]]:
+        """(state at 0+, toggle times in (0, T)) of one switch (0..5 = A_H, A_L, B_H, ...)."""
+        leg, low = divmod(switch, 2)
+        if self.duty is None:
+            return bool(self.gates & LEG_BITS[leg][low]), ()
+        d = self.duty[leg]
+        if d <= 0.0:
+            return bool(low), ()
+        if d >= 1.0:
+            return not low, ()
+        return bool(low), (0.5 * period_s * (1.0 - d), 0.5 * period_s * (1.0 + d))
+
+
+class SwitchTimeline:
+    """Builds each period's constant-word intervals from the old and new command.
+
+    Remembers, per switch, when its command last turned it on (relative to the current period
+    start) so that dead time spans period boundaries.
+    """
+
+    def __init__(self, period_s: float, delay_s: float, dead_time_s: float):
+        self.period_s = period_s
+        self.delay_s = delay_s
+        self.dead_time_s = dead_time_s
+        # Per switch: time of the command's last rising edge (<= 0), or None while commanded off.
+        self._rise: list[float | None] = [None] * 6
+
+    def reset(self, command: Command) -> None:
+        """The command has held forever (e.g. safe state): no pending dead time."""
+        for j in range(6):
+            on, _ = command.edges(j, self.period_s)
+            self._rise[j] = -math.inf if on else None
+
+    def trivial(self, old: Command, new: Command) -> bool:
+        """True when the whole period is one interval with new.gates (the common fast case)."""
+        return (new.duty is None and self.dead_time_s == 0.0
+                and (self.delay_s == 0.0 or old == new))
+
+    def build(self, old: Command, new: Command) -> list[tuple[float, float, int]]:
+        """[(start, end, word), ...] covering [0, T), times relative to the period start."""
+        T = self.period_s
+        if self.dead_time_s == 0.0 and (self.delay_s == 0.0 or old == new):
+            if new.duty is None:
+                return [(0.0, T, new.gates)]
+            return self._duty_sweep(new.duty)
+        delay = min(self.delay_s, T)
+        td = self.dead_time_s
+        actual: list[list[tuple[float, float]]] = []
+        for j in range(6):
+            state0, old_edges = old.edges(j, T)
+            new_state0, new_edges = new.edges(j, T)
+            # Command state as a list of toggles on [0, T).
+            toggles: list[float] = []
+            if delay > 0.0:
+                start = state0
+                toggles.extend(t for t in old_edges if t < delay)
+                state_at_delay = state0 ^ (len(toggles) % 2 == 1)
+                new_at_delay = new_state0 ^ (sum(1 for t in new_edges if t <= delay) % 2 == 1)
+                if delay < T and state_at_delay != new_at_delay:
+                    toggles.append(delay)
+                toggles.extend(t for t in new_edges if delay < t < T)
+            else:
+                start = new_state0
+                toggles.extend(new_edges)
+            # On-intervals of the command, then of the switch (turn-on delayed by td).
+            intervals = []
+            on = start
+            rise = self._rise[j] if start and self._rise[j] is not None else (0.0 if start else None)
+            for t in toggles:
+                if on:
+                    intervals.append((rise, t))
+                    rise = None
+                else:
+                    rise = t
+                on = not on
+            if on:
+                intervals.append((rise, T))
+                self._rise[j] = rise - T
+            else:
+                self._rise[j] = None
+            switch_on = []
+            for a, b in intervals:
+                a = max(a + td, 0.0)
+                if a < b:
+                    switch_on.append((a, b))
+            actual.append(switch_on)
+        return self._word_intervals(actual)
+
+    def _duty_sweep(self, duty: tuple[float, float, float]) -> list[tuple[float, float, int]]:
+        """One centre-aligned period without dead time: legs switch at T (1 -+ d) / 2."""
+        T = self.period_s
+        word = 0
+        toggles = []
+        for x, d in enumerate(duty):
+            hi, lo = LEG_BITS[x]
+            if d >= 1.0:
+                word |= hi
+            elif d <= 0.0:
+                word |= lo
+            else:
+                word |= lo
+                toggles.append((0.5 * T * (1.0 - d), hi | lo))
+                toggles.append((0.5 * T * (1.0 + d), hi | lo))
+        toggles.sort()
+        out = []
+        t = 0.0
+        for when, mask in toggles:
+            if when > t:
+                out.append((t, when, word))
+                t = when
+            word ^= mask
+        out.append((t, T, word))
+        return out
+
+    def _word_intervals(self, actual: list[list[tuple[float, float]]]
+                        ) -> list[tuple[float, float, int]]:
+        T = self.period_s
+        cuts = {0.0, T}
+        for switch_on in actual:
+            for a, b in switch_on:
+                cuts.add(a)
+                cuts.add(b)
+        points = sorted(c for c in cuts if 0.0 <= c <= T)
+        out: list[tuple[float, float, int]] = []
+        for a, b in zip(points, points[1:]):
+            if b <= a:
+                continue
+            mid = 0.5 * (a + b)
+            word = 0
+            for j, switch_on in enumerate(actual):
+                for x, y in switch_on:
+                    if x <= mid < y:
+                        word |= 1 << j
+                        break
+            if out and out[-1][2] == word:
+                out[-1] = (out[-1][0], b, word)
+            else:
+                out.append((a, b, word))
+        return out

@@ -1,0 +1,351 @@
+"""The plant: motor, inverter, DC link, load and sensors advanced one control period at a time.
+
+Per period k (T = control_period_s):
+
+    s = plant.sample()        # what the board's converters read at t_k = k T
+    plant.step(gates=...)     # integrate [t_k, t_k+1] with the board's answer
+
+The answer takes effect computation_delay_s after t_k; before that the previous command holds.
+The period is cut into intervals of constant switch state (computation delay, PWM edges, dead
+time, load-profile knots) and each interval is integrated exactly as it is, never averaged:
+with all legs driven, an ideal DC link and no device drop, by the motor's plain-float RK4
+(the fast path: one RK4 step per 50 us); otherwise by the general network with diode events
+(plant_rt.circuit).
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from math import pi
+
+from plant_rt.circuit import S32, Network
+from plant_rt.dc_link import DcLink
+from plant_rt.inverter import (
+    LEG_BITS, H, N, P, Command, InverterParams, SwitchTimeline, driven_vector, leg_states,
+    shoot_through,
+)
+from plant_rt.load import Load
+from plant_rt.motor import MotorModel
+from plant_rt.profile import BenchProfile
+from plant_rt.sensors import STATUS_GATE_FAULT, STATUS_INDEX_PULSE, SensorSample, Sensors
+from plant_rt.spec import coerce
+
+TWO_PI = 2.0 * pi
+RPM_PER_RAD_S = 60.0 / TWO_PI
+
+#: Fields of Plant.truth(), in order. Speed is mechanical; angles wrapped to (-pi, pi];
+#: psi is the stator flux linkage; u_* and i_dc are averages over the last period.
+TRUTH_FIELDS = ("t_s", "i_a", "i_b", "i_c", "i_alpha", "i_beta", "psi_alpha", "psi_beta",
+                "flux_mag_wb", "torque_nm", "speed_rad_s", "speed_rpm", "theta_e_rad",
+                "theta_m_rad", "v_dc", "i_dc", "load_torque_nm", "u_alpha", "u_beta")
+
+
+_GATE_COMMANDS = tuple(Command(gates=g) for g in range(64))
+_SHOOT_THROUGH = tuple(shoot_through(g) for g in range(64))
+
+
+def wrap_angle(x: float) -> float:
+    """x wrapped to (-pi, pi]."""
+    r = math.remainder(x, TWO_PI)
+    return pi if r == -pi else r
+
+
+class Plant:
+    """See the module docstring. Attributes: period (k), t_s, load, sensors, motor, dc_link."""
+
+    def __init__(self, profile: BenchProfile, seed: int = 0):
+        self.profile = profile
+        self.seed = seed
+        timing = profile.timing
+        self._T = timing.control_period_s
+        self.motor = MotorModel(profile.motor)
+        self.inverter = profile.inverter
+        self.dc_link = DcLink(profile.dc_link)
+        self.load = Load(profile.load, clock=lambda: self.t_s)
+        self.sensors = Sensors(profile.sensors, seed)
+        self.network = Network(self.motor, profile.inverter, self.dc_link, self.load)
+        self._timeline = SwitchTimeline(self._T, timing.computation_delay_s,
+                                        profile.inverter.dead_time_s)
+        self.period = 0
+        th = wrap_angle(profile.initial.theta_m_rad)
+        self._th = th
+        self._revs = 0
+        self._w = 0.0 if profile.load.locked else profile.initial.speed_rad_s
+        self._pa, self._pb = self.motor.flux_from_currents(0.0, 0.0, th)
+        self._vcap = self.dc_link.source_v
+        self._vdc = self.dc_link.source_v
+        self._cmd = _GATE_COMMANDS[0]
+        self._timeline.reset(self._cmd)
+        self._flags = 0
+        self._u_int = (0.0, 0.0)
+        self._idc_int = 0.0
+        self._net_dirty = True
+        self._zero_current = False
+        self._sample_k = -1
+        self._sample: SensorSample | None = None
+        self._load_key = None
+        self._load_seg = (0.0, 0.0, 0.0, math.inf)
+        self._rebuild()
+
+    # --------------------------------------------------------------- helpers
+    def _rebuild(self) -> None:
+        """Derived tables after a parameter change: fast-path vectors and the step limit."""
+        m = self.motor
+        h = self.profile.timing.max_step_s
+        h = min(h, self.dc_link.stiff_step_s())
+        lmin = min(m.ld, m.lq)
+        h = min(h, 0.5 * lmin / m.r)
+        if self.dc_link.dynamic:
+            h = min(h, 0.2 * math.sqrt(lmin * self.dc_link.c))
+        if self.inverter.device_drop_v > 0.0:
+            h = min(h, 0.5 * lmin * self.inverter.device_knee_a / self.inverter.device_drop_v)
+        self._h_max = h
+        self._n_fast = max(1, math.ceil(self._T / h - 1e-9))
+        vdc = self.dc_link.source_v
+        self._vectors = []
+        for word in range(64):
+            vec = driven_vector(word, vdc)
+            self._vectors.append(None if vec is None else vec + (leg_states(word),))
+        self.network.invalidate()
+        self._fast_ok = self.dc_link.ideal and self.inverter.device_drop_v == 0.0
+        self._timeline.dead_time_s = self.inverter.dead_time_s
+        # Every gate command is one interval: no dead time, and no delay that could split it.
+        self._one_interval = (self.inverter.dead_time_s == 0.0
+                              and self.profile.timing.computation_delay_s == 0.0)
+
+    def _load_segment(self, t: float) -> tuple[float, float, float]:
+        """(profile value at t, slope, next knot) with a cache for the constant case."""
+        key = self.load.version
+        seg_t, v0, slope, t_next = self._load_seg
+        if key != self._load_key or not seg_t <= t < t_next:
+            v0, slope, t_next = self.load.segment(t)
+            self._load_seg = (t, v0, slope, t_next)
+            self._load_key = key
+            return v0, slope, t_next
+        return v0 + slope * (t - seg_t), slope, t_next
+
+    # ------------------------------------------------------------------ API
+    @property
+    def t_s(self) -> float:
+        return self.period * self._T
+
+    @property
+    def control_period_s(self) -> float:
+        return self._T
+
+    def step(self, gates: int | None = None, duty=None) -> None:
+        """Integrates one control period with the new command (None keeps the previous one)."""
+        old = self._cmd
+        if duty is None and gates is None:
+            new = old
+        elif duty is None and type(gates) is int and 0 <= gates < 64:
+            new = _GATE_COMMANDS[gates]
+        else:
+            new = Command.parse(gates, duty)
+        T = self._T
+        t0 = self.period * T
+        th_start = self._th
+        self._flags = 0
+        load = self.load
+        seg_t, v0, slope, t_next = self._load_seg
+        if load.version == self._load_key and seg_t <= t0 and t0 + T <= t_next:
+            v0 += slope * (t0 - seg_t)
+        else:
+            v0, slope, t_next = self._load_segment(t0)
+        vec = self._vectors[new.gates] if new.duty is None else None
+        if (vec is not None and self._fast_ok and t_next >= t0 + T and not load.locked
+                and (self._one_interval or (old is new and self._timeline.dead_time_s == 0.0))):
+            va, vb, ga, gb, legs = vec
+            pa0, pb0 = self._pa, self._pb
+            n = self._n_fast
+            pa, pb, self._w, self._th = self.motor.advance(
+                pa0, pb0, self._w, th_start, va, vb, T / n, n, v0, slope,
+                self.motor.b + load.kw)
+            self._pa, self._pb = pa, pb
+            r = self.motor.r
+            self._u_int = (va * T, vb * T)
+            # int i dt follows from eq. (1) exactly as RK4 integrated it: (u T - dpsi) / R.
+            self._idc_int = (ga * (va * T - (pa - pa0)) + gb * (vb * T - (pb - pb0))) / r
+            if self._net_dirty:
+                self.network.set_driven(legs)
+                self._net_dirty = False
+                self._zero_current = False
+        else:
+            self._general(t0, old, new)
+        self._cmd = new
+        th = self._th
+        if (th_start >= 0.0) != (th >= 0.0):
+            self._flags |= STATUS_INDEX_PULSE
+        if th > pi:
+            th -= TWO_PI
+            self._revs += 1
+        elif th <= -pi:
+            th += TWO_PI
+            self._revs -= 1
+        self._th = th
+        self.period += 1
+
+    def _general(self, t0: float, old: Command, new: Command) -> None:
+        """A period that is not one ideal driven interval: split it and integrate each part."""
+        T = self._T
+        net = self.network
+        y = [self._pa, self._pb, self._w, self._th, self._vcap]
+        acc = [0.0, 0.0, 0.0]
+        fast = self._fast_ok and not self.load.locked
+        for a, b, word in self._timeline.build(old, new):
+            if _SHOOT_THROUGH[word]:
+                self._flags |= STATUS_GATE_FAULT
+            while b - a > 1e-15 * T:
+                v0, slope, t_next = self._load_segment(t0 + a)
+                end = min(b, t_next - t0) if t_next - t0 > a else b
+                vec = self._vectors[word] if fast else None
+                if vec is not None:
+                    self._advance(y, vec, end - a, v0, slope, acc)
+                    if self._net_dirty:
+                        net.set_driven(vec[4])
+                        self._net_dirty = False
+                else:
+                    net.begin(t0 + a, y, leg_states(word))
+                    if not (fast and self._diode_interval(y, end - a, v0, slope, acc)):
+                        y = net.integrate(t0 + a, t0 + end, y, self._h_max, acc)
+                    self._net_dirty = True
+                a = end
+        if self.load.locked:
+            y[2] = 0.0
+        self._pa, self._pb, self._w, self._th, self._vcap = y
+        self._u_int = (acc[0], acc[1])
+        self._idc_int = acc[2]
+        self._zero_current = net.all_zero and self._net_dirty
+        if self.dc_link.dynamic:
+            self._vdc = self._vcap
+        elif self.dc_link.resistive:
+            self._vdc = net.vdc     # the network's last evaluation is at the period's end
+        else:
+            self._vdc = self.dc_link.source_v
+
+    def _advance(self, y: list[float], vec: tuple, length: float, v0: float, slope: float,
+                 acc: list[float]) -> None:
+        """The fast RK4 over one driven interval; updates y and the period's integrals."""
+        motor = self.motor
+        va, vb, ga, gb, _ = vec
+        n = max(1, math.ceil(length / self._h_max - 1e-9))
+        pa0, pb0 = y[0], y[1]
+        y[0], y[1], y[2], y[3] = motor.advance(pa0, pb0, y[2], y[3], va, vb, length / n, n, v0,
+                                               slope, motor.b + self.load.kw)
+        acc[0] += va * length
+        acc[1] += vb * length
+        acc[2] += (ga * (va * length - (y[0] - pa0)) + gb * (vb * length - (y[1] - pb0))) / motor.r
+
+    def _diode_interval(self, y: list[float], length: float, v0: float, slope: float,
+                        acc: list[float]) -> bool:
+        """An open leg whose diode conducts throughout is, with no device drop and an ideal
+        link, the same as its switch on (low diode: 0 V, high diode: v_dc). Tries the fast RK4
+        with that word and keeps it if no diode current reached zero; False leaves y as it
+        was for the general network (dead time costs little away from current zeros)."""
+        net = self.network
+        if net.zero:
+            return False
+        word = 0
+        for x, k in enumerate(net.kinds):
+            word |= LEG_BITS[x][0] if k in (H, N) else LEG_BITS[x][1]
+        vec = self._vectors[word]
+        trial = list(y)
+        part = [0.0, 0.0, 0.0]
+        self._advance(trial, vec, length, v0, slope, part)
+        ia, ib, _, _ = self.motor.currents(trial[0], trial[1], trial[3])
+        cur = (ia, -0.5 * ia + S32 * ib, -0.5 * ia - S32 * ib)
+        for x, k in enumerate(net.kinds):
+            if (k == P and cur[x] <= 0.0) or (k == N and cur[x] >= 0.0):
+                return False
+        y[:] = trial
+        for i in range(3):
+            acc[i] += part[i]
+        return True
+
+    def safe_state(self) -> None:
+        """All six switches off from now on: the motor coasts through the diodes until the next
+        step() with gates or duty (the bench's hardware disable, no computation delay)."""
+        self._cmd = _GATE_COMMANDS[0]
+        self._timeline.reset(self._cmd)
+        self.network.invalidate()
+
+    def sample(self) -> SensorSample:
+        """The board's reading at t_k (the same object if called again in the same period)."""
+        k = self.period
+        if self._sample_k == k:
+            return self._sample
+        if self._zero_current:
+            ia = ib = 0.0
+        else:
+            ia, ib, _, _ = self.motor.currents(self._pa, self._pb, self._th)
+        self._sample = self.sensors.read(k, ia, ib, self._vdc, self._revs, self._th, self._flags)
+        self._sample_k = k
+        return self._sample
+
+    def truth(self) -> tuple[float, ...]:
+        """The plant's true state at t_k, in the order of TRUTH_FIELDS."""
+        m = self.motor
+        pa, pb, th, w = self._pa, self._pb, self._th, self._w
+        if self._zero_current:
+            ia = ib = i_d = i_q = 0.0     # every leg open and no current: exactly none
+        else:
+            ia, ib, i_d, i_q = m.currents(pa, pb, th)
+        t = self.period * self._T
+        te = m.torque(i_d, i_q)
+        tl = te if self.load.locked else self.load.torque(t, w)
+        T = self._T
+        return (t, ia, -0.5 * ia + S32 * ib, -0.5 * ia - S32 * ib, ia, ib, pa, pb,
+                math.hypot(pa, pb), te, w, w * RPM_PER_RAD_S, wrap_angle(m.p * th), th,
+                self._vdc, self._idc_int / T, tl, self._u_int[0] / T, self._u_int[1] / T)
+
+    # ------------------------------------------------------- runtime changes
+    def set_dc_voltage(self, v: float) -> None:
+        """Source voltage (a sag or surge) from now on."""
+        v = float(v)
+        if not math.isfinite(v) or v < 0.0:
+            raise ValueError(f"DC source voltage must be a finite number >= 0, got {v!r}")
+        self.dc_link.source_v = v
+        if self.dc_link.ideal:
+            self._vdc = v
+        self._rebuild()
+
+    def set_motor_param(self, name: str, value: float) -> None:
+        """Changes a motor constant while running (a hotter winding, a weaker magnet...).
+
+        The phase currents are continuous across the change (the flux linkage is recomputed).
+        """
+        if name == "pole_pairs":
+            raise ValueError("pole_pairs cannot change while the plant runs")
+        try:
+            value = coerce(type(self.motor.params), name, value)
+        except KeyError:
+            names = [f.name for f in dataclasses.fields(self.motor.params) if f.name != "pole_pairs"]
+            raise ValueError(f"unknown motor parameter {name!r} (known: {', '.join(names)})") from None
+        except ValueError as exc:
+            raise ValueError(f"motor parameter {name}: {exc}") from None
+        _, _, i_d, i_q = self.motor.currents(self._pa, self._pb, self._th)
+        self.motor.set_params(dataclasses.replace(self.motor.params, **{name: value}))
+        self._pa, self._pb = self.motor.flux_from_currents(i_d, i_q, self._th)
+        self._rebuild()
+
+    def set_inverter_param(self, name: str, value: float) -> None:
+        """Changes dead_time_s, device_drop_v or device_knee_a while running."""
+        try:
+            value = coerce(InverterParams, name, value)
+        except KeyError:
+            raise ValueError(f"unknown inverter parameter {name!r}") from None
+        except ValueError as exc:
+            raise ValueError(f"inverter parameter {name}: {exc}") from None
+        if name == "dead_time_s" and value >= 0.5 * self._T:
+            raise ValueError(f"dead_time_s must be shorter than half a period, got {value}")
+        self.inverter = dataclasses.replace(self.inverter, **{name: value})
+        self.network.set_inverter(self.inverter)
+        self._rebuild()
+        self._timeline.reset(self._cmd)
+
+    @property
+    def state(self) -> dict[str, float]:
+        """Integrator state (for diagnostics and reference comparisons)."""
+        return {"psi_alpha": self._pa, "psi_beta": self._pb, "speed_rad_s": self._w,
+                "theta_m_rad": self._th, "revolutions": self._revs, "v_cap": self._vcap}
+

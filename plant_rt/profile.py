@@ -1,0 +1,207 @@
+"""Bench profiles: the YAML file that says which motor, inverter, DC link, load, sensors and
+control period the bench emulates, validated with the file, line and key of every bad value.
+
+    profile = load_profile()                              # plant_rt/profiles/paper.yaml
+    profile = load_profile("my_bench.yaml", overrides={"motor": {"resistance_ohm": 0.6}})
+
+Every section and key is optional; a missing one takes the paper's value (the dataclass
+defaults). Unknown keys, wrong types and out-of-range values are errors. Overrides are merged
+over the file's values and validated the same way; their errors name the key and say it came
+from the overrides.
+"""
+from __future__ import annotations
+
+import copy
+import dataclasses
+import typing
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+from hil.yaml_source import ConfigError, YamlDocument, format_key, load_yaml
+
+from plant_rt.dc_link import DcLinkParams
+from plant_rt.inverter import InverterParams
+from plant_rt.load import LoadParams
+from plant_rt.motor import MotorParams
+from plant_rt.sensors import SensorParams
+from plant_rt.spec import coerce, param, to_float
+
+#: Controller parameters the bench may push with PARAM_SET: the hil_param_id names of
+#: protocol/c/hil_proto.h, lower case, without the HIL_PARAM_ prefix.
+CONTROLLER_PARAMS = (
+    "control_period_s", "current_a_per_count", "current_offset_counts", "vdc_v_per_count",
+    "vdc_offset_counts", "encoder_counts_per_rev", "current_phases", "pole_pairs",
+    "stator_resistance_ohm", "stator_inductance_h", "magnet_flux_wb", "flux_ref_wb",
+    "flux_band_wb", "torque_band_nm", "torque_limit_nm", "speed_kp_nm_per_rad_s",
+    "speed_ki_nm_per_rad", "speed_lpf_cutoff_hz", "ekf_k1", "ekf_k2", "ekf_k3",
+    "flux_drift_cutoff_hz", "telemetry_divider", "overcurrent_a", "encoder_loss_timeout_s",
+    "control_step_cycles",
+)
+READ_ONLY_PARAMS = ("control_step_cycles",)
+
+
+@dataclass(frozen=True)
+class TimingParams:
+    """The controller samples at t_k = k T; its answer takes effect computation_delay_s later."""
+
+    control_period_s: float = param(50.0e-6, gt=0)
+    computation_delay_s: float = param(0.0, ge=0)
+    max_step_s: float = param(50.0e-6, gt=0)   # longest RK4 step within a switching interval
+
+
+@dataclass(frozen=True)
+class InitialState:
+    speed_rad_s: float = param(0.0)     # mechanical
+    theta_m_rad: float = param(0.0)     # currents start at zero
+
+
+@dataclass(frozen=True)
+class BenchProfile:
+    timing: TimingParams = field(default_factory=TimingParams)
+    motor: MotorParams = field(default_factory=MotorParams)
+    inverter: InverterParams = field(default_factory=InverterParams)
+    dc_link: DcLinkParams = field(default_factory=DcLinkParams)
+    load: LoadParams = field(default_factory=LoadParams)
+    sensors: SensorParams = field(default_factory=SensorParams)
+    initial: InitialState = field(default_factory=InitialState)
+    controller: dict[str, float] = field(default_factory=dict)
+    source: str = "<defaults>"
+
+    @property
+    def control_period_s(self) -> float:
+        return self.timing.control_period_s
+
+    def as_dict(self) -> dict[str, Any]:
+        """Plain nested data (for logs and reports), every section including defaults."""
+        out = {}
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            out[f.name] = _plain(dataclasses.asdict(value) if dataclasses.is_dataclass(value)
+                                 else value)
+        return out
+
+
+SECTIONS = {f.name for f in dataclasses.fields(BenchProfile)} - {"source"}
+
+
+def default_profile_path() -> Path:
+    return Path(__file__).resolve().parent / "profiles" / "paper.yaml"
+
+
+def load_profile(path: str | Path | None = None,
+                 overrides: dict[str, Any] | None = None) -> BenchProfile:
+    """Reads and validates a bench profile; raises hil.yaml_source.ConfigError on a bad value."""
+    path = Path(path) if path is not None else default_profile_path()
+    doc = load_yaml(path)
+    data = doc.data if doc.data is not None else {}
+    marks: set[tuple] = set()
+    if overrides:
+        if not isinstance(overrides, dict):
+            raise ConfigError("overrides must be a mapping of sections", f"{doc.source} (overrides)")
+        if not isinstance(data, dict):
+            raise doc.error((), "a bench profile is a mapping of sections")
+        data = copy.deepcopy(data)
+        _merge(data, overrides, (), marks)
+    return build_profile(data, _error_factory(doc, marks), doc.source)
+
+
+def build_profile(data: Any, err: Callable[[tuple, str], ConfigError],
+                  source: str = "<data>") -> BenchProfile:
+    """Validates already-parsed profile data; `err(key_path, message)` makes the errors."""
+    if not isinstance(data, dict):
+        raise err((), "a bench profile is a mapping of sections "
+                      f"({', '.join(sorted(SECTIONS))})")
+    hints = typing.get_type_hints(BenchProfile)
+    sections: dict[str, Any] = {}
+    for key, value in data.items():
+        if key not in SECTIONS:
+            raise err((key,), f"unknown section (known: {', '.join(sorted(SECTIONS))})")
+        if key == "controller":
+            sections[key] = _controller(value, err)
+        else:
+            sections[key] = _build(hints[key], value, (key,), err)
+    profile = BenchProfile(**sections, source=source)
+    _cross_check(profile, err)
+    return profile
+
+
+def _build(cls: type, data: Any, path: tuple, err: Callable[[tuple, str], ConfigError]) -> Any:
+    names = [f.name for f in dataclasses.fields(cls)]
+    if data is None:
+        data = {}
+    if not isinstance(data, dict):
+        raise err(path, f"expected a mapping with keys {', '.join(names)}")
+    hints = typing.get_type_hints(cls)
+    kwargs = {}
+    for key, value in data.items():
+        if key not in names:
+            raise err(path + (key,), f"unknown key (known: {', '.join(names)})")
+        if dataclasses.is_dataclass(hints[key]):
+            kwargs[key] = _build(hints[key], value, path + (key,), err)
+            continue
+        try:
+            kwargs[key] = coerce(cls, key, value)
+        except ValueError as exc:
+            raise err(path + (key,), str(exc)) from None
+    return cls(**kwargs)
+
+
+def _controller(data: Any, err: Callable[[tuple, str], ConfigError]) -> dict[str, float]:
+    if data is None:
+        return {}
+    if not isinstance(data, dict):
+        raise err(("controller",), "expected a mapping of controller parameter names to numbers")
+    out = {}
+    for key, value in data.items():
+        path = ("controller", key)
+        if key not in CONTROLLER_PARAMS:
+            raise err(path, "unknown controller parameter (known: "
+                            f"{', '.join(p for p in CONTROLLER_PARAMS if p not in READ_ONLY_PARAMS)})")
+        if key in READ_ONLY_PARAMS:
+            raise err(path, "read-only controller parameter: the board reports it, the bench "
+                            "cannot set it")
+        try:
+            out[key] = to_float(value)
+        except ValueError as exc:
+            raise err(path, str(exc)) from None
+    return out
+
+
+def _cross_check(profile: BenchProfile, err: Callable[[tuple, str], ConfigError]) -> None:
+    period = profile.timing.control_period_s
+    if profile.timing.computation_delay_s > period:
+        raise err(("timing", "computation_delay_s"),
+                  f"must be between 0 and one control period ({period:g} s), "
+                  f"got {profile.timing.computation_delay_s:g}")
+    if profile.inverter.dead_time_s >= 0.5 * period:
+        raise err(("inverter", "dead_time_s"),
+                  f"must be shorter than half a control period ({0.5 * period:g} s), "
+                  f"got {profile.inverter.dead_time_s:g}")
+    for key, message in profile.dc_link.problems():
+        raise err(("dc_link", key), message)
+
+
+def _merge(base: dict, over: dict, path: tuple, marks: set[tuple]) -> None:
+    for key, value in over.items():
+        if isinstance(value, dict) and isinstance(base.get(key), dict):
+            _merge(base[key], value, path + (key,), marks)
+        else:
+            base[key] = copy.deepcopy(value)
+            marks.add(path + (key,))
+
+
+def _error_factory(doc: YamlDocument, marks: set[tuple]) -> Callable[[tuple, str], ConfigError]:
+    def err(path: tuple, message: str) -> ConfigError:
+        if any(path[:i] in marks for i in range(1, len(path) + 1)):
+            return ConfigError(message, f"{doc.source} (overrides)", None, format_key(path) or None)
+        return doc.error(path, message)
+    return err
+
+
+def _plain(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    return value

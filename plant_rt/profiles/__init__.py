@@ -1,0 +1,1 @@
+"""Bench profiles shipped with the package (YAML data; paper.yaml is the default)."""

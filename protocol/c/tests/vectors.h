@@ -1,0 +1,63 @@
+/* Reader for protocol/vectors/vectors.txt (format described at the top of that file). Test code only. */
+#ifndef HIL_TEST_VECTORS_H
+#define HIL_TEST_VECTORS_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "../hil_proto.h"
+
+#define VEC_NAME_MAX 64
+#define VEC_MAX_CAN 16
+#define VEC_MAX_YIELDS 64
+#define VEC_MAX_COUNTERS 16
+
+typedef struct {
+    char name[VEC_NAME_MAX];
+    uint32_t value;
+} vec_counter;
+
+typedef struct {
+    char name[VEC_NAME_MAX];
+    int is_reject;
+    hil_msg msg; /* type, seq and fields as written */
+    uint8_t role;
+    uint16_t base_id;
+    uint8_t serial[HIL_MAX_ENCODED_FRAME];
+    size_t serial_len;
+    hil_can_frame can[VEC_MAX_CAN];
+    size_t can_count;
+    hil_msg can_msg; /* what a fresh CAN receiver reports (canfield lines applied) */
+    int line;
+} vec_message;
+
+typedef struct {
+    char name[VEC_NAME_MAX];
+    int is_can;
+    uint16_t base_id;
+    uint8_t *bytes; /* serial streams */
+    size_t len;
+    hil_can_frame *frames; /* CAN streams */
+    size_t frame_count;
+    size_t yields[VEC_MAX_YIELDS]; /* indices into vec_file.messages */
+    uint8_t yield_roles[VEC_MAX_YIELDS];
+    size_t yield_count;
+    vec_counter counters[VEC_MAX_COUNTERS];
+    size_t counter_count;
+    int line;
+} vec_stream;
+
+typedef struct {
+    vec_message *messages;
+    size_t message_count;
+    vec_stream *streams;
+    size_t stream_count;
+} vec_file;
+
+/* Parses the file; on error prints "path:line: reason" to stderr and returns -1. */
+int vec_load(const char *path, vec_file *out);
+void vec_free(vec_file *vf);
+/* Expected counter value (0 when the stream does not list it). */
+uint32_t vec_counter_value(const vec_stream *s, const char *name);
+
+#endif

@@ -1,0 +1,273 @@
+"""The plant against reference integrations of the same physics written independently here.
+
+The references integrate the rotor-frame current equations (or, for diode conduction, the
+per-phase circuit equations) with scipy's solve_ivp at rtol 1e-10 or tighter; the plant
+integrates the stationary-frame flux linkage with RK4. Agreement therefore checks the
+equations, the Table 2 voltages and the integration accuracy together.
+"""
+from __future__ import annotations
+
+import math
+import random
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from plant_rt import TRUTH_FIELDS, Plant, load_profile
+
+F = {name: i for i, name in enumerate(TRUTH_FIELDS)}
+RATED_RAD_S = 3000.0 * 2.0 * math.pi / 60.0
+VECTOR_WORDS = (0x29, 0x25, 0x26, 0x16, 0x1A, 0x19)   # V1..V6 as HIL_GATE_* words
+ZERO_WORDS = (0x2A, 0x15)                              # V0 (all low), V7 (all high)
+
+
+def table2(word: int, vdc: float) -> tuple[float, float]:
+    """Paper's Table 2: V1(100) = (2U/3, 0), V2(110) = (U/3, U/sqrt3), ... V0, V7 = 0."""
+    if word in ZERO_WORDS:
+        return 0.0, 0.0
+    k = VECTOR_WORDS.index(word)
+    return {0: (2 * vdc / 3, 0.0), 1: (vdc / 3, vdc / math.sqrt(3)),
+            2: (-vdc / 3, vdc / math.sqrt(3)), 3: (-2 * vdc / 3, 0.0),
+            4: (-vdc / 3, -vdc / math.sqrt(3)), 5: (vdc / 3, -vdc / math.sqrt(3))}[k]
+
+
+def dq_model(motor):
+    p, r, psim = motor.pole_pairs, motor.resistance_ohm, motor.flux_linkage_wb
+    ld, lq, j, b = motor.inductance_d_h, motor.inductance_q_h, motor.inertia_kgm2, \
+        motor.damping_nm_per_rad_s
+
+    def f(_t, x, ua, ub):
+        i_d, i_q, w, th = x
+        c, s = math.cos(p * th), math.sin(p * th)
+        ud, uq = c * ua + s * ub, -s * ua + c * ub
+        we = p * w
+        torque = 1.5 * p * (psim * i_q + (ld - lq) * i_d * i_q)
+        return [(ud - r * i_d + we * lq * i_q) / ld,
+                (uq - r * i_q - we * (ld * i_d + psim)) / lq,
+                (torque - b * w) / j, w]
+    return f
+
+
+def run_against_reference(overrides: dict, duration_s: float, w_start: float, w_end: float,
+                          seed: int, random_share: float = 0.5) -> dict:
+    """Random gate words (half uniformly random, half steering the speed along a ramp from
+    w_start to w_end); the plant and solve_ivp period by period from the same state."""
+    overrides = {**overrides, "initial": {**overrides.get("initial", {}), "speed_rad_s": w_start}}
+    profile = load_profile(overrides=overrides)
+    motor, T = profile.motor, profile.control_period_s
+    vdc = profile.dc_link.source_voltage_v
+    p = motor.pole_pairs
+    f = dq_model(motor)
+    plant = Plant(profile)
+    rng = random.Random(seed)
+    x = [0.0, 0.0, w_start, profile.initial.theta_m_rad]
+    n = round(duration_s / T)
+    peak = err_i = err_w = err_th = 0.0
+    w_seen = []
+    for k in range(n):
+        target = w_start + (w_end - w_start) * k / n
+        if rng.random() < random_share:
+            word = (VECTOR_WORDS + ZERO_WORDS)[rng.randrange(8)]
+        else:
+            # Motoring vector ahead of the q-axis (into field weakening above base speed) or
+            # a braking one behind it.
+            lead = math.pi / 2 + 0.6 if x[2] < target else -math.pi / 2
+            word = VECTOR_WORDS[round((p * x[3] + lead) / (math.pi / 3)) % 6]
+        sol = solve_ivp(f, (0.0, T), x, method="DOP853", rtol=1e-10, atol=1e-12,
+                        args=table2(word, vdc))
+        x = list(sol.y[:, -1])
+        plant.step(gates=word)
+        truth = plant.truth()
+        c, s = math.cos(p * x[3]), math.sin(p * x[3])
+        ia, ib = c * x[0] - s * x[1], s * x[0] + c * x[1]
+        peak = max(peak, abs(ia), abs(ib))
+        err_i = max(err_i, abs(ia - truth[F["i_alpha"]]), abs(ib - truth[F["i_beta"]]))
+        err_w = max(err_w, abs(x[2] - truth[F["speed_rad_s"]]) / abs(x[2]))
+        w_seen.append(x[2])
+        # Angles agree modulo a turn (the plant wraps its own).
+        err_th = max(err_th, abs(math.remainder(x[3] - truth[F["theta_m_rad"]], 2 * math.pi)))
+    return {"peak_a": peak, "current_rel": err_i / peak, "speed_rel": err_w, "angle_rad": err_th,
+            "w_min": min(w_seen), "w_max": max(w_seen)}
+
+
+def test_random_gates_match_solve_ivp_up_to_twice_rated_speed():
+    """1 s of random gates sweeping 0.3x to 2x rated speed: phase current error < 1e-5 of the
+    peak, speed error < 1e-6 relative (issue 2; RK4 at 50 us reaches about 2e-9 here).
+
+    The sweep goes up: braking hard behind the q-axis makes the rotor angle unstable against
+    a fixed voltage sequence (an inverted pendulum), where any two integrations, however
+    exact, drift apart exponentially; that says nothing about the integrator."""
+    result = run_against_reference({}, 1.0, 0.3 * RATED_RAD_S, 2.05 * RATED_RAD_S, seed=3,
+                                   random_share=0.4)
+    # The run really covers the speed range it claims.
+    assert result["w_min"] < 0.35 * RATED_RAD_S and result["w_max"] > 1.95 * RATED_RAD_S
+    assert result["peak_a"] > 5.0
+    assert result["current_rel"] < 1e-5
+    assert result["speed_rel"] < 1e-6
+    assert result["angle_rad"] < 1e-6
+
+
+def test_interior_magnet_ld_ne_lq_matches_solve_ivp():
+    """Ld != Lq (reluctance torque, rotor-angle dependent inductance) at twice rated speed."""
+    overrides = {"motor": {"inductance_d_h": 3.0e-3, "inductance_q_h": 7.0e-3},
+                 "initial": {"theta_m_rad": 0.3}}
+    result = run_against_reference(overrides, 0.15, 2.0 * RATED_RAD_S, 2.0 * RATED_RAD_S, seed=5)
+    assert result["current_rel"] < 1e-5
+    assert result["speed_rel"] < 1e-6
+
+
+def test_four_pole_pairs_match_solve_ivp():
+    overrides = {"motor": {"pole_pairs": 4}}
+    result = run_against_reference(overrides, 0.1, 0.4 * RATED_RAD_S, 0.5 * RATED_RAD_S, seed=7)
+    assert result["current_rel"] < 1e-5
+    assert result["speed_rel"] < 1e-6
+
+
+# ----------------------------------------------------------------- diode conduction
+def phase_circuit_reference(motor, vdc: float, state: list[float], t_end: float):
+    """All legs open (safe state), surface magnets: each phase L di/dt = V_x - V_n - R i - e_x
+    with V_x = 0 (low diode, i_x > 0) or vdc (high diode, i_x < 0). Three conducting phases
+    give V_n = sum(V)/3; when one current reaches zero the other two form a series circuit
+    2L di/dt = V_x - V_y - 2 R i - (e_x - e_y); with two at zero nothing flows. Returns a
+    function t -> (i_a, i_b, i_c, w) and the event times."""
+    p, r, psim, L = motor.pole_pairs, motor.resistance_ohm, motor.flux_linkage_wb, \
+        motor.inductance_d_h
+    j, b = motor.inertia_kgm2, motor.damping_nm_per_rad_s
+
+    def emf(th, w):
+        return [-p * w * psim * math.sin(p * th - 2 * math.pi * k / 3) for k in range(3)]
+
+    def rhs(conducting):
+        def f(_t, x):
+            ia, ib, w, th = x
+            i = [ia, ib, -ia - ib]
+            e = emf(th, w)
+            v = [0.0 if i[k] > 0 else vdc for k in range(3)]
+            d = [0.0, 0.0, 0.0]
+            if len(conducting) == 3:
+                vn = sum(v) / 3
+                d = [(v[k] - vn - r * i[k] - e[k]) / L for k in range(3)]
+            elif len(conducting) == 2:
+                x_, y_ = conducting
+                di = (v[x_] - v[y_] - 2 * r * i[x_] - (e[x_] - e[y_])) / (2 * L)
+                d[x_], d[y_] = di, -di
+            torque = sum(e[k] * i[k] for k in range(3)) / w   # electrical power / speed
+            return [d[0], d[1], (torque - b * w) / j, w]
+        return f
+
+    conducting = [k for k in range(3)]
+    t, x, pieces, events = 0.0, list(state), [], []
+    while t < t_end:
+        evs = []
+        for k in conducting:
+            def ev(_t, xx, k=k):
+                return (xx[0], xx[1], -xx[0] - xx[1])[k]
+            ev.terminal = True
+            evs.append(ev)
+        sol = solve_ivp(rhs(list(conducting)), (t, t_end), x, method="DOP853", rtol=1e-12,
+                        atol=1e-13, events=evs or None, dense_output=True)
+        pieces.append((t, sol.t[-1], sol.sol))
+        x, t = list(sol.y[:, -1]), sol.t[-1]
+        if sol.status == 1:
+            events.append(t)
+            hit = [k for n, k in enumerate(conducting) if len(sol.t_events[n])][0]
+            conducting.remove(hit)
+            if len(conducting) == 2:
+                i = [x[0], x[1], -x[0] - x[1]]
+                i[hit] = 0.0
+                i[conducting[1]] = -i[conducting[0]]
+                x[0], x[1] = i[0], i[1]
+                # The open phase's floating terminal must stay between the rails.
+                e = emf(x[3], x[2])
+                xx, yy = conducting
+                vx = 0.0 if i[xx] > 0 else vdc
+                vy = 0.0 if i[yy] > 0 else vdc
+                vn = (vx - e[xx] + vy - e[yy]) / 2
+                assert 0.0 < vn + e[hit] < vdc
+            else:
+                x[0] = x[1] = 0.0
+                conducting = []
+
+    def at(tq):
+        for a, b_, s in pieces:
+            if a <= tq <= b_:
+                y = s(tq)
+                return y[0], y[1], -y[0] - y[1], y[2]
+        raise ValueError(tq)
+    return at, events
+
+
+def test_safe_state_at_rated_speed_decays_through_diodes_then_stays_zero():
+    """Motoring at 3000 rpm, then all six switches off: the currents fall through the diodes
+    into the 70 V link (phase by phase, as the per-phase circuit reference says) and, since
+    the line back-EMF (sqrt3 * 0.0928 * 314 = 50 V) is below 70 V, stay exactly zero."""
+    profile = load_profile(overrides={"initial": {"speed_rad_s": RATED_RAD_S}})
+    plant = Plant(profile)
+    for _ in range(60):
+        plant.step(gates=0x25)              # V2: build up current
+    for _ in range(3):
+        plant.step(gates=0x26)
+    t = plant.truth()
+    start = [t[F["i_a"]], t[F["i_b"]], t[F["speed_rad_s"]], t[F["theta_m_rad"]]]
+    assert min(abs(start[0]), abs(start[1]), abs(t[F["i_c"]])) > 1.0   # three phases conduct
+    T = profile.control_period_s
+    n = 400
+    ref, events = phase_circuit_reference(profile.motor, 70.0, start, n * T)
+    assert len(events) == 2                   # one phase stops, then the other two together
+    plant.safe_state()
+    peak = max(abs(v) for v in start[:2])
+    worst = 0.0
+    for k in range(1, n + 1):
+        plant.step()
+        t = plant.truth()
+        ia, ib, ic, w = ref(k * T)
+        worst = max(worst, abs(t[F["i_a"]] - ia), abs(t[F["i_b"]] - ib), abs(t[F["i_c"]] - ic))
+        assert abs(t[F["speed_rad_s"]] - w) < 1e-6 * abs(w)
+        if k * T > events[-1] + T:
+            assert (t[F["i_a"]], t[F["i_b"]], t[F["i_c"]]) == (0.0, 0.0, 0.0)
+            assert t[F["i_dc"]] == 0.0
+    assert worst < 1e-6 * peak
+    # ... and stays zero while the rotor coasts on for 50 ms.
+    for _ in range(1000):
+        plant.step()
+        t = plant.truth()
+        assert (t[F["i_a"]], t[F["i_b"]], t[F["i_c"]]) == (0.0, 0.0, 0.0)
+        assert t[F["torque_nm"]] == 0.0
+    s = plant.sample()
+    assert abs(s.adc_i1 - 2048) <= 3 and abs(s.adc_i2 - 2048) <= 3   # zero current, 0.5 count noise
+
+
+@pytest.mark.parametrize("ld,lq", [(4.8e-3, 4.8e-3), (3.0e-3, 7.0e-3)])
+def test_safe_state_energy_returned_to_link(ld, lq):
+    """During the diode decay (Ld = Lq and Ld != Lq) the energy the link receives equals the
+    magnetic and kinetic energy released less the copper and damping losses."""
+    T = 5e-6
+    profile = load_profile(overrides={
+        "timing": {"control_period_s": T, "max_step_s": T},
+        "motor": {"inductance_d_h": ld, "inductance_q_h": lq},
+        "initial": {"speed_rad_s": RATED_RAD_S}})
+    m = profile.motor
+    plant = Plant(profile)
+    for _ in range(500):
+        plant.step(gates=0x25)
+    rows = [plant.truth()]
+    plant.safe_state()
+    for _ in range(2000):
+        plant.step()
+        rows.append(plant.truth())
+    a = np.array(rows)
+    assert np.all(a[-200:, F["i_a"]] == 0.0) and np.all(a[-200:, F["i_b"]] == 0.0)
+    e_link = -np.sum(a[1:, F["v_dc"]] * a[1:, F["i_dc"]]) * T
+    copper = np.trapezoid(1.5 * m.resistance_ohm * (a[:, F["i_alpha"]] ** 2 + a[:, F["i_beta"]] ** 2),
+                      dx=T)
+    w = a[:, F["speed_rad_s"]]
+    damping = np.trapezoid(m.damping_nm_per_rad_s * w ** 2, dx=T)
+    kinetic = 0.5 * m.inertia_kgm2 * (w[0] ** 2 - w[-1] ** 2)
+    th = a[0, F["theta_e_rad"]]
+    i_d = math.cos(th) * a[0, F["i_alpha"]] + math.sin(th) * a[0, F["i_beta"]]
+    i_q = -math.sin(th) * a[0, F["i_alpha"]] + math.cos(th) * a[0, F["i_beta"]]
+    magnetic = 0.75 * (ld * i_d ** 2 + lq * i_q ** 2)
+    assert e_link > 0.05
+    released = magnetic + kinetic - copper - damping
+    assert abs(e_link - released) < 1e-4 * e_link
