@@ -74,13 +74,14 @@ def _stop_process(proc: subprocess.Popen, grace_s: float = 1.0) -> None:
             proc.wait(grace_s)
 
 
-def _pty_pair() -> tuple[int, str]:
-    """A pseudo-terminal whose slave is raw before anyone writes (no echo of the board's bytes)."""
+def _pty_pair() -> tuple[int, int, str]:
+    """A pseudo-terminal whose slave is raw before anyone writes (no echo of the board's bytes).
+
+    The slave stays open until the bench's link has opened it too: a process reading a
+    master whose slave nobody holds gets EIO and would take it for a hang-up."""
     master, slave = os.openpty()
     tty.setraw(slave, termios.TCSANOW)
-    name = os.ttyname(slave)
-    os.close(slave)
-    return master, name
+    return master, slave, os.ttyname(slave)
 
 
 def _spawn_stub(args: list[str], master_fd: int) -> subprocess.Popen:
@@ -94,7 +95,7 @@ def connect(spec: str) -> BoardConnection:
     if spec == "stub":
         return BoardConnection(spec, StubLibraryLink(), hello_timeout_s=0.5, answer_timeout_s=0.0)
     if spec in ("stub-pty", "stub-can"):
-        master, slave_path = _pty_pair()
+        master, slave, slave_path = _pty_pair()
         mode = ["--stdio"] if spec == "stub-pty" else ["--slcan-stdio"]
         try:
             proc = _spawn_stub(mode, master)
@@ -109,6 +110,8 @@ def connect(spec: str) -> BoardConnection:
         except Exception:
             _stop_process(proc)
             raise
+        finally:
+            os.close(slave)
         conn = BoardConnection(spec, link, hello_timeout_s=3.0, answer_timeout_s=0.5, process=proc)
         conn._cleanups.append(lambda: _stop_process(proc))
         return conn

@@ -39,6 +39,7 @@ _MSG = struct.Struct("<BQHIQ")  # opcode, record length, channel id, sequence, l
 _MSG_PREFIX_LEN = 31  # + publish time
 _CHUNK_HEAD = struct.Struct("<QQQII")
 _KNOWN_OPCODES = {int(op) for op in Opcode}
+_OP_MESSAGE = int(Opcode.MESSAGE)  # a plain int: compared once per message
 
 _F = descriptor_pb2.FieldDescriptorProto
 _FIXED_DTYPES = {_F.TYPE_DOUBLE: ("<f8", 1), _F.TYPE_FLOAT: ("<f4", 5), _F.TYPE_FIXED32: ("<u4", 5),
@@ -297,7 +298,7 @@ class _File:
             end = pos + 9 + length
             if end > stop:
                 raise _err(self.path, f"corrupted chunk at byte {where}: a record overruns it")
-            if opcode == Opcode.MESSAGE:
+            if opcode == _OP_MESSAGE:
                 target = targets.get(cid)
                 if target is not None:
                     target.append(data[pos:end] if collect_records else log_time)

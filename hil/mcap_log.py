@@ -39,7 +39,6 @@ from mcap.records import (
     Channel,
     ChunkIndex,
     DataEnd,
-    Footer,
     Header,
     Metadata,
     MetadataIndex,

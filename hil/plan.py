@@ -52,6 +52,9 @@ PLANT_PARAMS: dict[str, str] = {
     "damping_nm_per_rad_s": "viscous damping",
 }
 
+# Named bench profiles (plant_rt's default profile is the paper's); anything
+# else in `profile:` must be a path to a profile file.
+PROFILE_NAMES = ("paper", "default")
 SPEED_SOURCES = ("encoder", "conventional", "ekf")
 MODES = ("lockstep", "realtime")
 LINK_PATTERN = r"^(stub|stub-pty|stub-can|qemu|serial:.+|can:.+)$"
@@ -639,6 +642,10 @@ def _build(doc: YamlDocument, path: Path) -> Plan:
         profile_path = (path.parent / profile).resolve()
         if not profile_path.is_file():
             raise doc.error(("profile",), f"profile file not found: {profile_path}")
+    elif profile is not None and profile not in PROFILE_NAMES:
+        raise doc.error(("profile",), f"unknown profile '{profile}': expected one of "
+                                      f"{', '.join(PROFILE_NAMES)} or a path to a profile "
+                                      f"file (containing '/' or ending in .yaml)")
     state = _BuildState(doc, v, str(doc.source))
     steps = tuple(state.step(raw, i) for i, raw in enumerate(data["steps"]))
     plots = tuple(state.plot(raw, i) for i, raw in enumerate(data.get("plots", [])))
@@ -940,5 +947,5 @@ def _opt_float(x: Any) -> float | None:
 __all__ = ["Plan", "Step", "StepBase", "CommandStep", "ParamSetStep", "LoadStep", "DcLinkStep",
            "PlantParamStep", "FaultStep", "RunStep", "WaitUntilStep", "MarkStep", "CheckStep",
            "Window", "PlotSpec", "load_plan", "parse_plan", "plan_files", "looks_like_plan", "BOARD_PARAMS",
-           "PLANT_PARAMS", "FAULTS", "SPEED_SOURCES", "MODES", "WAIT_COMPARISONS", "LOAD_TYPES",
+           "PLANT_PARAMS", "FAULTS", "PROFILE_NAMES", "SPEED_SOURCES", "MODES", "WAIT_COMPARISONS", "LOAD_TYPES",
            "STATISTICS", "ConfigError"]

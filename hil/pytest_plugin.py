@@ -19,7 +19,7 @@ whole recording).
 
 Options: ``--hil-link``, ``--hil-mode`` (default: the plan's, else the
 runner's) and ``--hil-out DIR`` (MCAP log and reports per plan in
-DIR/<plan>/).
+DIR/<plan>/, written by hil.runner.run_plan).
 
 Fixture ``bench``: a running bench session (hil.runner.Bench) for
 acceptance tests written in Python when YAML is not enough; see docs/plans.md.
@@ -104,24 +104,14 @@ class PlanFile(pytest.File):
         from hil.runner import run_plan
 
         opt = self.config.getoption
-        out_root = opt("--hil-out")
-        out_dir = None
-        if out_root is not None:
-            from hil.report import slug
-
-            out_dir = Path(out_root) / slug(self.plan.name)
         try:
-            result, signals = run_plan(self.plan, link=opt("--hil-link"), mode=opt("--hil-mode"),
-                                       out_dir=out_dir)
+            # With out_dir, run_plan writes the log and the reports into out_dir/<plan>/.
+            return run_plan(self.plan, link=opt("--hil-link"), mode=opt("--hil-mode"),
+                            out_dir=opt("--hil-out"))
         except (KeyboardInterrupt, SystemExit):
             raise
         except Exception as exc:  # noqa: BLE001 - every item of this plan reports it
             return exc
-        if out_dir is not None:
-            from hil.report import write_reports
-
-            write_reports(result, signals, out_dir, plan=self.plan)
-        return result, signals
 
 
 class _HilItem(pytest.Item):
@@ -185,17 +175,23 @@ def _find(result: PlanResult, name: str) -> CheckResult | None:
 def bench(request: pytest.FixtureRequest, tmp_path: Path):
     """A started bench (hil.runner.Bench) on --hil-link / --hil-mode, closed after the test.
 
-    Logs go into the test's tmp_path. Mark a test with
-    ``@pytest.mark.hil_profile("path/or/name")`` to use another bench profile.
+    Its MCAP log is tmp_path/bench.mcap. Mark a test with
+    ``@pytest.mark.hil_profile("path/to/profile.yaml")`` (or a profile name) to
+    use another bench profile.
     """
+    from hil.plan import PROFILE_NAMES
     from hil.runner import Bench
 
+    kwargs: dict[str, Any] = {"log_path": tmp_path / "bench.mcap"}
+    for key in ("link", "mode"):
+        value = request.config.getoption(f"--hil-{key}")
+        if value is not None:
+            kwargs[key] = value
     marker = request.node.get_closest_marker("hil_profile")
-    kwargs: dict[str, Any] = {"link": request.config.getoption("--hil-link"),
-                              "mode": request.config.getoption("--hil-mode"),
-                              "out_dir": tmp_path}
-    if marker is not None:
-        kwargs["profile"] = marker.args[0]
+    if marker is not None and marker.args[0] not in PROFILE_NAMES:
+        from plant_rt import load_profile
+
+        kwargs["profile"] = load_profile(marker.args[0])
     with Bench(**kwargs) as b:
         yield b
 

@@ -47,7 +47,15 @@ ICOUNT_SHIFT = 7
 _PACKAGES = {
     QEMU_BINARY: "qemu-system-arm",
     CROSS_COMPILER: "gcc-arm-none-eabi libnewlib-arm-none-eabi",
+    "arm-none-eabi-size": "binutils-arm-none-eabi",
     "make": "make",
+}
+
+# board_halt() statuses (vectors.c, main.c), as QEMU's exit status under semihosting.
+EXIT_REASONS = {
+    3: "firmware fault: HardFault, MemManage, BusFault, UsageFault or NMI",
+    4: "firmware took an interrupt it has no handler for",
+    5: "the app instance does not fit the RAM left between statics and stack",
 }
 
 _LISTENING_MARK = "waiting for connection on"
@@ -197,9 +205,14 @@ class QemuBoard:
         return self._proc.pid if self._proc is not None else None
 
     @property
+    def process(self) -> subprocess.Popen | None:
+        """The QEMU process (e.g. for a liveness check); stop() still owns its end."""
+        return self._proc
+
+    @property
     def returncode(self) -> int | None:
-        """QEMU's exit status once it has exited (the firmware's semihosting exit
-        status: 0 after SHUTDOWN, 3 on a fault), None while it runs."""
+        """QEMU's exit status once it has exited, None while it runs. The firmware
+        exits through semihosting only when it halts: see EXIT_REASONS."""
         return self._proc.poll() if self._proc is not None else None
 
     def output(self) -> str:
@@ -210,7 +223,7 @@ class QemuBoard:
         cmd = [QEMU_BINARY, "-M", "mps2-an386", "-cpu", "cortex-m4",
                "-display", "none", "-monitor", "none", "-nodefaults",
                "-serial", f"tcp:127.0.0.1:{port},server=on,wait=on,nodelay=on",
-               # the firmware exits QEMU with a status on SHUTDOWN or a fault (SYS_EXIT only)
+               # the firmware exits QEMU with a status when it halts (EXIT_REASONS); SYS_EXIT only
                "-semihosting-config", "enable=on,target=native",
                "-kernel", str(self.elf_path)]
         if self.icount_shift is not None:
@@ -275,11 +288,12 @@ class QemuBoard:
             raise QemuBoardError("QemuBoard is not started")
         code = self._proc.poll()
         if code is not None:
-            raise QemuBoardError(f"QEMU exited with status {code}"
-                                 f"{' (firmware fault)' if code == 3 else ''}:\n{self.output()}")
+            reason = EXIT_REASONS.get(code)
+            raise QemuBoardError(f"QEMU exited with status {code}{f' ({reason})' if reason else ''}:\n"
+                                 f"{self.output()}")
 
     def wait_exit(self, timeout_s: float) -> int | None:
-        """Waits for QEMU to exit on its own (firmware SHUTDOWN); its status, or None on timeout."""
+        """Waits for QEMU to exit on its own (a firmware that halts); its status, or None on timeout."""
         if self._proc is None:
             return None
         try:
@@ -302,3 +316,82 @@ class QemuBoard:
         self._stop_process()
         code = self._proc.returncode if self._proc is not None else None
         return code
+
+
+# -- on-target cost of the control step --------------------------------------------------
+def firmware_size(elf_path: str | Path = FIRMWARE_ELF) -> dict[str, int]:
+    """Flash (text + initialised data) and RAM (data + bss, stack and app instance
+    excluded) of a firmware ELF, from arm-none-eabi-size."""
+    _require_tool("arm-none-eabi-size")
+    out = subprocess.run(["arm-none-eabi-size", str(elf_path)], capture_output=True, text=True,
+                         check=True).stdout.splitlines()[1].split()
+    text, data, bss = (int(v) for v in out[:3])
+    return {"text_bytes": text, "data_bytes": data, "bss_bytes": bss,
+            "flash_bytes": text + data, "static_ram_bytes": data + bss}
+
+
+def rotating_samples(count: int, electrical_hz: float = 50.0, period_s: float = 50e-6):
+    """SAMPLEs of balanced phase currents rotating at electrical_hz, an encoder turning
+    with them and a steady DC link: synthetic, open-loop inputs on which every estimator
+    and all six sectors do work, for measuring and comparing the firmware."""
+    import math
+
+    from protocol.messages import Sample
+
+    for k in range(count):
+        theta = 2.0 * math.pi * electrical_hz * k * period_s
+        yield Sample(k, 2048 + int(400 * math.cos(theta)),
+                     2048 + int(400 * math.cos(theta - 2.0 * math.pi / 3.0)),
+                     2900, int(electrical_hz * k * period_s * 4096) & 0xFFFF, 0)
+
+
+def measure_control_step(samples: int = 400, icount_shift: int = ICOUNT_SHIFT) -> dict:
+    """Cycles of ctl_step on the target (instructions under QEMU icount), as the firmware
+    itself reports them through HIL_PARAM_CONTROL_STEP_CYCLES after every SAMPLE, for each
+    speed source; the first step (cold state) is left out of the statistics."""
+    import statistics
+
+    from protocol.links import open_link
+    from protocol.messages import (CMD_ENABLE, PROTOCOL_VERSION, Command, Gates, Hello, ParamGet, ParamId,
+                                   ParamValue, Role, SpeedSource, Status)
+
+    def exchange(link, msg, answer_type):
+        link.send(msg)
+        while True:
+            reply = link.recv(5.0)
+            if reply is None:
+                raise QemuBoardError(f"the firmware did not answer {msg} within 5 s")
+            if isinstance(reply, answer_type):
+                return reply
+
+    result: dict = {"icount_shift": icount_shift, "samples": samples, "modes": {}}
+    with QemuBoard(icount_shift=icount_shift) as board, open_link(board.link_url) as link:
+        result["hello_name"] = exchange(link, Hello(PROTOCOL_VERSION, Role.BENCH, 0, 50_000, name=b"measure"),
+                                        Hello).name_str
+        for source in SpeedSource:
+            exchange(link, Command(CMD_ENABLE, source, 100.0, 0.0, 0.0), Status)
+            cycles = []
+            for sample in rotating_samples(samples):
+                exchange(link, sample, Gates)
+                value = exchange(link, ParamGet(ParamId.CONTROL_STEP_CYCLES), ParamValue)
+                cycles.append(int(value.value))
+            steady = cycles[1:]
+            result["modes"][source.name.lower()] = {
+                "min": min(steady), "median": int(statistics.median(steady)), "max": max(steady)}
+    result.update(firmware_size(FIRMWARE_ELF))
+    return result
+
+
+def main() -> None:
+    """python -m hil.qemu_board: prints the on-target step cost and the firmware size."""
+    r = measure_control_step()
+    print(f"firmware: {r['hello_name']} (QEMU mps2-an386, -icount shift={r['icount_shift']})")
+    for mode, c in r["modes"].items():
+        print(f"ctl_step, speed source {mode:12s}: {c['median']} instructions "
+              f"(min {c['min']}, max {c['max']}) over {r['samples'] - 1} steps")
+    print(f"flash {r['flash_bytes']} B (text {r['text_bytes']}, data {r['data_bytes']}), "
+          f"static RAM {r['static_ram_bytes']} B (data + bss)")
+
+
+if __name__ == "__main__":
+    main()

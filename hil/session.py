@@ -30,6 +30,7 @@ from hil.board_params import board_parameters
 from hil.recorder import COMMAND_FIELDS, Recorder
 
 RPM_PER_RAD_S = 60.0 / (2.0 * math.pi)
+_TRUTH_INDEX = {name: i for i, name in enumerate(TRUTH_FIELDS)}
 
 
 class SessionError(RuntimeError):
@@ -103,6 +104,9 @@ class BenchSession:
         self._gates = 0
         self._closed = False
         self._mailbox = None
+        # Modbus input registers are refreshed every 10 ms of simulated time.
+        self.publish_every = max(1, round(0.01 / self.period_s))
+        self.fault_bits = 0
         self.rt_stats: dict[str, Any] = {}
 
     # ----------------------------------------------------------------- setup
@@ -263,25 +267,29 @@ class BenchSession:
         watchdog = self.config.watchdog_periods
         mailbox = self._mailbox
         on_period = self.on_period
+        publish_every = self.publish_every
         for done in range(count):
             if mailbox is not None and mailbox.pending:
                 self._apply_mailbox(mailbox)
             sample = plant.sample()
             k = sample.period
-            link.send(Sample(k, sample.adc_i1, sample.adc_i2, sample.adc_vdc, sample.encoder,
-                             sample.status))
             recorder.period(k, plant.truth(), sample)
             gates = None
-            msg = link.recv(answer_timeout)
-            while msg is not None:
-                if type(msg) is Gates:
-                    if msg.period == k:
-                        gates = msg.gates
-                        break
-                    self.stale_answers += 1
-                else:
-                    dispatch(msg)
+            try:
+                link.send(Sample(k, sample.adc_i1, sample.adc_i2, sample.adc_vdc, sample.encoder,
+                                 sample.status))
                 msg = link.recv(answer_timeout)
+                while msg is not None:
+                    if type(msg) is Gates:
+                        if msg.period == k:
+                            gates = msg.gates
+                            break
+                        self.stale_answers += 1
+                    else:
+                        dispatch(msg)
+                    msg = link.recv(answer_timeout)
+            except (OSError, ValueError) as exc:  # LinkError is an OSError: the line is gone
+                self._link_failed(k, exc)
             if gates is None:
                 self.missed_answers += 1
                 self.consecutive_misses += 1
@@ -300,9 +308,19 @@ class BenchSession:
                 plant.step(gates)
             if on_period is not None:
                 on_period(k)
+            if mailbox is not None and k % publish_every == 0:
+                self._publish(mailbox, k)
             if stop is not None and stop():
                 return done + 1
         return count
+
+    def _link_failed(self, k: int, exc: Exception) -> None:
+        self.plant.safe_state()
+        status = self.conn.board_exit_status()
+        board = f"; the board process exited with status {status}" if status is not None else ""
+        self.error = f"link failed at period {k} (t = {k * self.period_s:.6f} s): {exc}{board}"
+        self._event("link_failed", {"period": k, "reason": str(exc)})
+        raise SessionError(self.error) from exc
 
     def drain(self) -> None:
         """Collects what the board sent after the last GATES (its last TELEMETRY)."""
@@ -318,9 +336,36 @@ class BenchSession:
         self._mailbox = mailbox
 
     def _apply_mailbox(self, mailbox) -> None:
-        from hil.control_requests import apply_requests
+        """Applies what the Modbus port's clients wrote, between two periods."""
+        req = mailbox.take_requests()
+        if req is None:
+            return
+        plant = self.plant
+        if req.load_torque_nm is not None:
+            plant.load.set_constant(req.load_torque_nm)
+            self._event("modbus", {"load_torque_nm": req.load_torque_nm})
+        if req.dc_link_voltage_v is not None and req.dc_link_voltage_v > 0:
+            plant.set_dc_voltage(req.dc_link_voltage_v)
+            self._event("modbus", {"dc_link_voltage_v": req.dc_link_voltage_v})
+        if req.run is not None and req.run != self.command_state.enable:
+            self.send_command(enable=req.run)
+        if req.fault_bits is not None:
+            from hil.faults import apply_fault_bits
 
-        apply_requests(self, mailbox.take_requests())
+            apply_fault_bits(self, req.fault_bits)
+
+    def _publish(self, mailbox, k: int) -> None:
+        from hil.modbus_port import PlantSnapshot, StateBit
+
+        truth = self.recorder.truth_rows[-1]
+        f = _TRUTH_INDEX
+        state = (StateBit.RUNNING if self.command_state.enable else 0) | \
+            (StateBit.BOARD_FAULT if self.faults else 0) | \
+            (StateBit.REAL_TIME if self.config.mode == "realtime" else 0)
+        mailbox.publish(PlantSnapshot(
+            truth[f["speed_rpm"]], truth[f["i_a"]], truth[f["i_b"]], truth[f["i_c"]],
+            truth[f["torque_nm"]], truth[f["v_dc"]], k, self.rt_stats.get("deadline_misses", 0),
+            int(state), truth[f["load_torque_nm"]], self.fault_bits))
 
     # -------------------------------------------------------------- teardown
     def close(self, reason: str | None = None) -> None:

@@ -33,7 +33,8 @@ class FakeBoard:
         self.master, slave = os.openpty()
         tty.setraw(slave, termios.TCSANOW)
         self.slave_path = os.ttyname(slave)
-        os.close(slave)
+        # Held open while the board runs: reading a master whose slave nobody has open fails (EIO).
+        self._slave = slave
         self.params: dict[int, float] = {}
         self.samples = 0
         self.received: list = []
@@ -54,6 +55,7 @@ class FakeBoard:
         if self.master >= 0:
             os.close(self.master)
             self.master = -1
+        os.close(self._slave)
 
     def _write(self, encoder: FrameEncoder, msg) -> None:
         os.write(self.master, encoder.encode(msg))

@@ -422,3 +422,44 @@ def test_fixed_types_table_matches_protobuf_wire_sizes():
     for name, (ftype, wire, code) in FIXED_TYPES.items():
         size = {"d": 8, "q": 8, "Q": 8, "f": 4, "i": 4, "I": 4}[code]
         assert (wire == 1) == (size == 8), name
+
+
+def test_reader_takes_files_of_other_writers(tmp_path):
+    """A file from the mcap package's own Writer (schemas and channels inside chunks, a
+    protobuf message with varint and string fields) decodes through the generic paths."""
+    from mcap.writer import Writer
+
+    f = descriptor_pb2.FieldDescriptorProto
+    file = descriptor_pb2.FileDescriptorProto(name="x/Status.proto", package="x", syntax="proto3")
+    msg = file.message_type.add(name="Status")
+    msg.field.add(name="label", number=1, type=f.TYPE_STRING, label=f.LABEL_OPTIONAL)
+    msg.field.add(name="count", number=2, type=f.TYPE_INT32, label=f.LABEL_OPTIONAL)
+    msg.field.add(name="value", number=3, type=f.TYPE_DOUBLE, label=f.LABEL_OPTIONAL)
+    fds = descriptor_pb2.FileDescriptorSet(file=[file])
+    schema = type("S", (), {"data": fds.SerializeToString(), "name": "x.Status"})
+    cls = _message_class(schema)
+    path = tmp_path / "foreign.mcap"
+    with open(path, "wb") as out:
+        writer = Writer(out, chunk_size=512)
+        writer.start()
+        pb = writer.register_channel("/status", "protobuf",
+                                     writer.register_schema("x.Status", "protobuf", fds.SerializeToString()))
+        js = writer.register_channel("/note", "json", writer.register_schema("note", "jsonschema", b"{}"))
+        for k in range(100):
+            writer.add_message(pb, 1_000 + k * 10, cls(label=f"s{k}", count=-k, value=k / 4).SerializeToString(),
+                               1_000 + k * 10)
+            if k % 10 == 0:
+                writer.add_message(js, 1_000 + k * 10, json.dumps({"k": k, "deep": {"x": [k]}}).encode(),
+                                   1_000 + k * 10)
+        writer.finish()
+    data = read_log(path)
+    assert data.complete and data.start_ns == 1_000
+    status = data["/status"]
+    assert list(status["label"][:3]) == ["s0", "s1", "s2"]
+    assert status["count"].dtype == np.int64 and list(status["count"][:3]) == [0, -1, -2]
+    np.testing.assert_array_equal(status["value"], np.arange(100) / 4)
+    np.testing.assert_allclose(status.t_s, np.arange(100) * 10e-9)
+    note = data["/note"]
+    assert list(note["k"]) == list(range(0, 100, 10)) and note["deep.x"][1] == [10]
+    windowed = read_log(path, ["/status"], t0=500e-9, t1=600e-9)["/status"]
+    assert list(windowed["count"]) == [-50, -51, -52, -53, -54, -55, -56, -57, -58, -59, -60]

@@ -238,6 +238,8 @@ def test_profile_path_is_relative_to_the_plan(tmp_path):
     assert load_plan(_write(tmp_path, "name: p\nprofile: paper\nsteps:\n  - run: {duration_s: 1}\n")).profile_path is None
     err = _error(tmp_path, "name: p\nprofile: profiles/cold.yaml\nsteps:\n  - run: {duration_s: 1}\n")
     assert err.key == "profile" and "profile file not found" in err.message
+    err = _error(tmp_path, "name: p\nprofile: hot\nsteps:\n  - run: {duration_s: 1}\n")
+    assert err.line == 2 and "unknown profile 'hot': expected one of paper, default" in err.message
 
 
 def test_link_and_mode(tmp_path):

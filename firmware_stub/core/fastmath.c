@@ -1,6 +1,6 @@
 #include "fastmath.h"
 
-#include <stdint.h>
+#include <math.h>
 
 /* Cody-Waite split of pi/2 (fdlibm's): HI has 17 significant bits, so q * HI
  * is exact for |q| < 128, and LO = pi/2 - HI carries the rest. */
@@ -16,14 +16,24 @@
 #define FM_C1 (-0.49999895691871643f)
 #define FM_C2 0.04165629670023918f
 #define FM_C3 (-0.0013597827637568116f)
-/* atan(z) = z (A0 + z^2 (A1 + ... z^2 A6)) on [0, 1], error 2.5e-7 */
-#define FM_A0 0.9999961256980896f
-#define FM_A1 (-0.3331736922264099f)
-#define FM_A2 0.19807815551757812f
-#define FM_A3 (-0.13233338296413422f)
-#define FM_A4 0.07962360978126526f
-#define FM_A5 (-0.03360416740179062f)
-#define FM_A6 0.006811774335801601f
+/* sin(r) = r + r^3 (W1 + r^2 (W2 + r^2 W3)) on [-pi/2, pi/2], error 8.8e-7 */
+#define FM_W1 (-0.16665680706501007f)
+#define FM_W2 0.008312366902828217f
+#define FM_W3 (-0.00018492189701646566f)
+/* atan(z) = z (A0 + z^2 (A1 + ... z^2 A5)) on [0, 1], error 1.7e-6 */
+#define FM_A0 0.9999772310256958f
+#define FM_A1 (-0.33262282609939575f)
+#define FM_A2 0.19354042410850525f
+#define FM_A3 (-0.11642659455537796f)
+#define FM_A4 0.05264747887849808f
+#define FM_A5 (-0.01171918585896492f)
+/* asin(x) = pi/2 - sqrt(1 - x) (B0 + x (B1 + ... x B5)) on [0, 1], error 6.7e-7 */
+#define FM_B0 1.5707956552505493f
+#define FM_B1 (-0.21454279124736786f)
+#define FM_B2 0.08817091584205627f
+#define FM_B3 (-0.04592685401439667f)
+#define FM_B4 0.02061963826417923f
+#define FM_B5 (-0.004911002703011036f)
 
 void fm_sincos(float theta_rad, float *sin_out, float *cos_out)
 {
@@ -53,10 +63,23 @@ void fm_sincos(float theta_rad, float *sin_out, float *cos_out)
     }
 }
 
+float fm_sin(float theta_rad)
+{
+    float r = fm_wrap_pi(theta_rad);
+    /* sin(pi - r) = sin(r) folds [pi/2, pi] onto [0, pi/2] */
+    if (r > FM_HALF_PI) {
+        r = FM_PI - r;
+    } else if (r < -FM_HALF_PI) {
+        r = -FM_PI - r;
+    }
+    float r2 = r * r;
+    return r + r * r2 * (FM_W1 + r2 * (FM_W2 + r2 * FM_W3));
+}
+
 float fm_atan2(float y, float x)
 {
-    float ax = x < 0.0f ? -x : x;
-    float ay = y < 0.0f ? -y : y;
+    float ax = fabsf(x);
+    float ay = fabsf(y);
     float hi = ax > ay ? ax : ay;
     float lo = ax > ay ? ay : ax;
     if (hi == 0.0f) {
@@ -64,7 +87,7 @@ float fm_atan2(float y, float x)
     }
     float z = lo / hi;
     float z2 = z * z;
-    float a = z * (FM_A0 + z2 * (FM_A1 + z2 * (FM_A2 + z2 * (FM_A3 + z2 * (FM_A4 + z2 * (FM_A5 + z2 * FM_A6))))));
+    float a = z * (FM_A0 + z2 * (FM_A1 + z2 * (FM_A2 + z2 * (FM_A3 + z2 * (FM_A4 + z2 * FM_A5)))));
     if (ay > ax) {
         a = FM_HALF_PI - a;
     }
@@ -74,11 +97,17 @@ float fm_atan2(float y, float x)
     return y < 0.0f ? -a : a;
 }
 
-float fm_wrap_pi(float theta_rad)
+float fm_asin(float x)
 {
-    if (theta_rad >= -FM_PI && theta_rad <= FM_PI) {
-        return theta_rad;
-    }
+    float ax = fabsf(x);
+    ax = ax < 1.0f ? ax : 1.0f;
+    float p = FM_B0 + ax * (FM_B1 + ax * (FM_B2 + ax * (FM_B3 + ax * (FM_B4 + ax * FM_B5))));
+    float a = FM_HALF_PI - sqrtf(1.0f - ax) * p;
+    return x < 0.0f ? -a : a;
+}
+
+float fm_wrap_pi_slow(float theta_rad)
+{
     float turns = theta_rad * (1.0f / FM_TWO_PI);
     int32_t k = (int32_t)(turns + (turns >= 0.0f ? 0.5f : -0.5f));
     return theta_rad - (float)k * FM_TWO_PI;
