@@ -1,7 +1,8 @@
 """Wire-protocol costs: `python -m bench protocol [--quick]`.
 
 - Python codec: microseconds to encode and to decode one SAMPLE and one GATES frame.
-- C codec: nanoseconds per frame (protocol/c/build/hil_codec_bench, clock_gettime).
+- C codec: nanoseconds per frame (protocol/c/build/hil_codec_bench, clock_gettime), and
+  instructions per frame under valgrind callgrind (repeatable).
 - Round trips per second between Python and the C echo (protocol/c/build/hil_echo) over a
   pseudo-terminal: SAMPLE frames through SerialLink and the C decoder/encoder, against the same
   loop with the echo in raw byte mode and the Python side writing and reading the same bytes
@@ -95,6 +96,27 @@ def c_codec(quick: bool) -> dict:
     return json.loads(proc.stdout)
 
 
+def c_instructions(quick: bool) -> dict:
+    """Instructions per frame of the C codec on x86-64 (valgrind callgrind, difference of two
+    run lengths so start-up cancels): repeatable, unlike the timings."""
+    _make("build/hil_codec_bench")
+    n = 500 if quick else 2000
+    out = {}
+    for op in ("sample_encode", "sample_decode", "sample_decode_bytewise", "gates_encode", "gates_decode",
+               "gates_decode_bytewise"):
+        counts = []
+        for iterations in (n, 2 * n):
+            proc = subprocess.run(["valgrind", "--tool=callgrind", "--callgrind-out-file=/dev/null",
+                                   str(C_DIR / "build" / "hil_codec_bench"), "--only", op, str(iterations)],
+                                  capture_output=True, text=True)
+            found = [line for line in proc.stderr.splitlines() if "Collected :" in line]
+            if proc.returncode != 0 or not found:
+                return {"error": f"valgrind callgrind failed: {proc.stderr.strip()[-300:]}"}
+            counts.append(int(found[0].split(":")[-1]))
+        out[f"{op}_instructions"] = round((counts[1] - counts[0]) / n, 1)
+    return out
+
+
 def _spawn_echo(raw: bool) -> tuple[subprocess.Popen, SerialLink]:
     master, slave = os.openpty()
     tty.setraw(slave, termios.TCSANOW)
@@ -181,6 +203,7 @@ def run(quick: bool = False) -> dict:
         "command": "python -m bench protocol" + (" --quick" if quick else ""),
         "python_codec": python_codec(*((5_000, 3) if quick else (50_000, 7))),
         "c_codec_ns": c_codec(quick),
+        "c_codec_instructions": c_instructions(quick),
         "pty_round_trip": pty_round_trips(*((300, 4) if quick else (1_000, 21))),
     }
 

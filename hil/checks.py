@@ -220,6 +220,33 @@ def lag_s(t: np.ndarray, y: np.ndarray, ref: np.ndarray, max_lag_s: float) -> tu
     return float((lags[j] + frac) * dt), float(c1)
 
 
+def ramp_lag_s(t: np.ndarray, y: np.ndarray, ref: np.ndarray,
+               min_r2: float = 0.98) -> tuple[float, dict[str, float]]:
+    """Delay of y behind a ramping reference: -mean(y - ref) / slope of ref.
+
+    The velocity-error definition: a first-order filter with time constant
+    tau, fed a ramp, settles to lag tau behind it; an estimator that models
+    acceleration (the EKF's w' state) settles to zero lag. Cross-correlation
+    cannot measure this (every shift of a straight line correlates perfectly),
+    so the window must hold a ramp: a straight-line fit of ref must explain at
+    least min_r2 of its variance, or this raises CheckError.
+    """
+    if len(t) < 3:
+        raise CheckError("a ramp lag needs at least three samples")
+    x = t - t[0]
+    slope, intercept = np.polyfit(x, ref, 1)
+    ss_tot = float(np.sum((ref - np.mean(ref)) ** 2))
+    if ss_tot == 0 or slope == 0:
+        raise CheckError("the reference is constant in the window: no ramp to lag behind")
+    r2 = 1.0 - float(np.sum((ref - (slope * x + intercept)) ** 2)) / ss_tot
+    if r2 < min_r2:
+        raise CheckError(f"the reference is not a ramp in this window (straight-line fit "
+                         f"R^2 = {r2:.3f} < {min_r2}); choose a window of constant acceleration")
+    mean_error = float(np.mean(y - ref))
+    return -mean_error / float(slope), {"slope_per_s": float(slope), "mean_error": mean_error,
+                                        "r2": r2}
+
+
 def ripple(t: np.ndarray, y: np.ndarray, measure: str = "peak_to_peak",
            detrend: str = "mean") -> float:
     """Peak-to-peak or RMS of y about its mean (or about a fitted line, for a drifting signal)."""
@@ -476,9 +503,10 @@ def _m_bound(ctx: CheckContext) -> Measurement:
     if limits.low is None:
         return Measurement(hi, s.unit, "maximum over the window", details)
     # Both bounds: report the extreme with the least room left (or the most overshoot).
+    u = "" if s.unit == "1" else f" {s.unit}"
     if (hi - limits.high) >= (limits.low - lo):
-        return Measurement(hi, s.unit, f"maximum over the window (minimum {lo:.6g} {s.unit})", details)
-    return Measurement(lo, s.unit, f"minimum over the window (maximum {hi:.6g} {s.unit})", details)
+        return Measurement(hi, s.unit, f"maximum over the window (minimum {lo:.6g}{u})", details)
+    return Measurement(lo, s.unit, f"minimum over the window (maximum {hi:.6g}{u})", details)
 
 
 def _m_statistic(ctx: CheckContext) -> Measurement:
@@ -536,6 +564,18 @@ def _m_lag(ctx: CheckContext) -> Measurement:
             np.unwrap(ref, period=2 * convert(math.pi, "rad", s.unit))
     lag, peak = lag_s(s.t_s, y, ref, ctx.arg("max_lag_s"))
     return Measurement(lag, "s", f"correlation peak {peak:.3f}", {"correlation": peak})
+
+
+def _m_ramp_lag(ctx: CheckContext) -> Measurement:
+    s = ctx.main
+    ref = ctx.reference_values()
+    y = s.values
+    if is_angle(s.unit):
+        ref = np.unwrap(ref, period=2 * convert(math.pi, "rad", s.unit))
+        y = ref + error_between(y, ref, s.unit)
+    lag, d = ramp_lag_s(s.t_s, y, ref)
+    return Measurement(lag, "s", f"mean error {d['mean_error']:.4g} {s.unit} on a ramp of "
+                       f"{d['slope_per_s']:.4g} {s.unit}/s", d)
 
 
 def _m_ripple(ctx: CheckContext) -> Measurement:
@@ -633,6 +673,9 @@ CHECK_KINDS: dict[str, CheckKind] = {k.name: k for k in (
         "max_lag_s": ArgSpec("positive", default=0.02, doc="search range either side"),
     }, _m_lag, "s", "Delay of the signal behind the reference by normalised cross-correlation "
                      "(positive = later).", min_samples=4),
+    CheckKind("ramp_lag", (_MAIN, _REF_SIGNAL), {}, _m_ramp_lag, "s",
+              "Delay behind a ramping reference, -mean(signal - reference) / its slope "
+              "(positive = later).", min_samples=3),
     CheckKind("ripple", (_MAIN,), {
         "measure": ArgSpec("choice", default="peak_to_peak", choices=("peak_to_peak", "rms")),
         "detrend": ArgSpec("choice", default="mean", choices=("mean", "linear")),
@@ -762,5 +805,5 @@ def evaluate_check(spec: "CheckStep", signals: SignalSet, marks: Mapping[str, fl
 __all__ = ["CheckError", "CheckKind", "ArgSpec", "Role", "Measurement", "CheckContext",
            "CHECK_KINDS", "STATISTICS", "evaluate_check", "result_unit",
            "final_value", "settling_time", "rise_time", "rise_crossings", "overshoot_percent", "statistic",
-           "envelope_excursion", "error_between", "lag_s", "ripple", "estimate_fundamental_hz",
+           "envelope_excursion", "error_between", "lag_s", "ramp_lag_s", "ripple", "estimate_fundamental_hz",
            "thd_percent", "circularity_percent"]

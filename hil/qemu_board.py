@@ -15,15 +15,16 @@ firmware's UART takes them. ``-display none -monitor none`` and an explicit
 ``-serial`` keep QEMU's monitor off the line (``-nographic`` would multiplex it
 there and swallow 0x01, the monitor's escape prefix).
 
-The guest runs under ``-icount shift=7``: every instruction takes 2^7 ns of
-virtual time, so its instruction stream is independent of host load, and a
-SysTick tick (QEMU clocks SysTick at the board's 25 MHz) is shorter than an
-instruction, so the firmware's SysTick measurement resolves single
-instructions. QEMU itself still runs as fast as the host lets it.
+The guest runs under ``-icount shift=7``: virtual time advances 2^7 ns per
+executed instruction, so the cost the firmware measures for a control step is
+an instruction count that does not depend on host load; and a SysTick tick
+(QEMU clocks SysTick at the board's 25 MHz of virtual time) is then shorter than
+an instruction, so the SysTick measurement resolves single instructions
+(firmware_stub/boards/mps2_an386/cycles.h). QEMU still runs as fast as the host
+lets it.
 """
 from __future__ import annotations
 
-import ctypes
 import os
 import shutil
 import signal
@@ -124,12 +125,13 @@ def _free_tcp_port() -> int:
         return sock.getsockname()[1]
 
 
-def _die_with_parent() -> None:
-    """Runs in the child before exec: SIGKILL QEMU if the Python process dies
-    without reaching __exit__ (e.g. it is itself SIGKILLed)."""
-    pr_set_pdeathsig = 1
-    libc = ctypes.CDLL(None, use_errno=True)
-    libc.prctl(pr_set_pdeathsig, signal.SIGKILL, 0, 0, 0)
+def _death_signal_wrapper() -> list[str]:
+    """Command prefix that makes QEMU receive SIGKILL when its parent dies, so it
+    cannot outlive a Python process killed before __exit__ (prctl PR_SET_PDEATHSIG,
+    kept across exec). util-linux's setpriv does it between fork and exec, where
+    running Python code (preexec_fn) could deadlock a threaded parent."""
+    setpriv = shutil.which("setpriv")
+    return [setpriv, "--pdeathsig", "KILL"] if setpriv else []
 
 
 def _kill_group(proc: subprocess.Popen, grace_s: float) -> None:
@@ -260,14 +262,14 @@ class QemuBoard:
         """Starts QEMU on `port`; True once it listens, False if it exited first."""
         self._stop_process()
         self._output = _OutputCollector()
+        # The parent-death signal fires when the *thread* that forked exits, so
+        # it is only used from the main thread; from other threads, cleanup
+        # relies on stop() and the finalizer.
         main_thread = threading.current_thread() is threading.main_thread()
-        # PR_SET_PDEATHSIG fires when the *thread* that forked exits, so it is
-        # only safe from the main thread; from other threads, cleanup relies on
-        # stop() / the finalizer.
+        prefix = _death_signal_wrapper() if main_thread else []
         self._proc = subprocess.Popen(
-            self.command(port), stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT, start_new_session=True,
-            preexec_fn=_die_with_parent if main_thread else None)
+            prefix + self.command(port), stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT, start_new_session=True)
         self._finalizer = weakref.finalize(self, _kill_group, self._proc, 0.5)
         self._reader = threading.Thread(target=self._output.read, args=(self._proc.stdout,),
                                         name=f"qemu-output-{self._proc.pid}", daemon=True)

@@ -48,6 +48,7 @@ class Recorder:
         self.command_rows: list[tuple] = []
         self._log = None
         self._truth_ch = self._sensor_ch = self._telemetry_ch = None
+        self._frames_ch = None
 
     def attach_log(self, log) -> None:
         self._log = log
@@ -88,8 +89,18 @@ class Recorder:
             self._log.write_json("/cmd", round(k * self.period_s * 1e9),
                                  dict(zip(COMMAND_FIELDS, row), period=k))
 
-    def flush_log(self) -> None:
-        """Nothing is buffered outside the MCAP writer; kept for symmetry with close()."""
+    def frames(self, k: int, capture: dict[str, tuple[bytes, int]]) -> None:
+        """Raw frames of the last batch of periods, one log message per direction."""
+        if self._log is None:
+            return
+        if self._frames_ch is None:
+            self._frames_ch = {
+                "out": self._log.add_bytes_channel("/link/frames_out", "hil.RawFrames"),
+                "in": self._log.add_bytes_channel("/link/frames_in", "hil.RawFrames")}
+        t_ns = round(k * self.period_s * 1e9)
+        for direction, (data, count) in capture.items():
+            if count:
+                self._frames_ch[direction].write(t_ns, data, count)
 
     # ---------------------------------------------------------------- export
     def arrays(self) -> dict[str, tuple[np.ndarray, np.ndarray, str]]:

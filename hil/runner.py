@@ -190,9 +190,11 @@ def _run(plan: Plan, opts: RunOptions) -> tuple[PlanResult, SignalSet]:
         if opts.modbus is not None:
             from hil.modbus_port import ControlMailbox, ModbusPort
 
-            mailbox = ControlMailbox()
+            mailbox = ControlMailbox(load_torque_nm=profile.load.torque_nm,
+                                     dc_link_voltage_v=profile.dc_link.source_voltage_v)
             session.attach_mailbox(mailbox)
-            port = ModbusPort(mailbox, host=opts.modbus[0], port=opts.modbus[1])
+            port = ModbusPort(mailbox, host=opts.modbus[0], port=opts.modbus[1],
+                              isolation="process" if mode == "realtime" else "thread")
             port.start()
         deadline = None if plan.timeout_s is None else wall0 + plan.timeout_s
         _execute(plan, session, stimuli, state, deadline, opts.progress)

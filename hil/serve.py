@@ -31,11 +31,15 @@ def serve_command(args) -> int:
 
     profile = load_profile(args.profile)
     config = SessionConfig(link=args.link, mode=args.mode, log_path=args.log)
-    mailbox = ControlMailbox()
+    mailbox = ControlMailbox(load_torque_nm=profile.load.torque_nm,
+                             dc_link_voltage_v=profile.dc_link.source_voltage_v)
     port = None
     if args.modbus and args.modbus != "off":
         host, number = parse_host_port(args.modbus)
-        port = ModbusPort(mailbox, host=host, port=number)
+        # A Modbus request holds the interpreter for 0.1-0.3 ms: in real time the port
+        # runs in its own process so that it cannot stall a period.
+        port = ModbusPort(mailbox, host=host, port=number,
+                          isolation="process" if args.mode == "realtime" else "thread")
     chunk = max(1, round(0.01 / profile.control_period_s))  # 10 ms of simulated time
     total = None if args.duration is None else round(args.duration / profile.control_period_s)
     with BenchSession(profile, config) as session:

@@ -26,6 +26,7 @@ from protocol.messages import (
 )
 
 from hil.bench_links import BoardConnection, connect
+from hil.link_tap import LinkTap, tappable
 from hil.board_params import board_parameters
 from hil.recorder import COMMAND_FIELDS, Recorder
 
@@ -49,7 +50,9 @@ class SessionConfig:
     answer_timeout_s: float | None = None
     realtime_period_s: float | None = None  # None: the profile's control period
     realtime_miss_budget: int = 1000        # deadline misses before a realtime run ends in ERROR
-    log_full_rate: bool = True
+    # Frames pass through a LinkTap (raw-frame log, link-fault injection) where the link
+    # carries bytes; CAN links carry frames and are not tapped.
+    tap_link: bool = True
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)
 
 
@@ -107,6 +110,7 @@ class BenchSession:
         # Modbus input registers are refreshed every 10 ms of simulated time.
         self.publish_every = max(1, round(0.01 / self.period_s))
         self.fault_bits = 0
+        self.tap: LinkTap | None = None
         self.rt_stats: dict[str, Any] = {}
 
     # ----------------------------------------------------------------- setup
@@ -129,6 +133,8 @@ class BenchSession:
             self.log = McapLog(cfg.log_path, metadata=self._metadata())
             self.recorder.attach_log(self.log)
         self.conn = connect(cfg.link)
+        if cfg.tap_link and tappable(self.conn.link):
+            self.tap = self.conn.link = LinkTap(self.conn.link, seed=cfg.seed)
         if cfg.hello_timeout_s is not None:
             self.conn.hello_timeout_s = cfg.hello_timeout_s
         if cfg.answer_timeout_s is not None:
@@ -268,11 +274,16 @@ class BenchSession:
         mailbox = self._mailbox
         on_period = self.on_period
         publish_every = self.publish_every
+        tap = self.tap
         for done in range(count):
             if mailbox is not None and mailbox.pending:
                 self._apply_mailbox(mailbox)
             sample = plant.sample()
             k = sample.period
+            if tap is not None:
+                tap.tick(k)
+                if k % publish_every == 0:
+                    recorder.frames(k, tap.take_capture())
             recorder.period(k, plant.truth(), sample)
             gates = None
             try:
@@ -390,7 +401,8 @@ class BenchSession:
             try:
                 if reason:
                     self._event("session_end", {"reason": reason})
-                self.recorder.flush_log()
+                if self.tap is not None:
+                    self.recorder.frames(self.plant.period, self.tap.take_capture())
                 if self.conn is not None:
                     self.log.write_json("/link/counters", round(self.plant.t_s * 1e9),
                                         _jsonable(self.link_counters()))

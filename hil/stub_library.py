@@ -76,6 +76,7 @@ class StubLibraryLink:
         self._encoder = FrameEncoder()
         self._decoder = StreamDecoder()
         self._inbox: deque = deque()
+        self._raw = bytearray()       # answers not yet decoded (read_bytes takes them raw)
         self._closed = False
         self.bytes_out = 0
         self.bytes_in = 0
@@ -92,13 +93,21 @@ class StubLibraryLink:
         self.bytes_out += len(data)
         self.frames_out += 1
         if n:
-            answer = self._tx.raw[:n]
+            self._raw += self._tx.raw[:n]
             self.bytes_in += n
-            self._inbox.extend(self._decoder.feed(answer))
 
     def recv(self, timeout_s: float | None = None):
         inbox = self._inbox
+        if not inbox and self._raw:
+            inbox.extend(self._decoder.feed(bytes(self._raw)))
+            self._raw.clear()
         return inbox.popleft() if inbox else None
+
+    def read_bytes(self, timeout_s: float | None = None) -> bytes:
+        """The firmware's answers as raw bytes, bypassing the decoder (link taps)."""
+        data = bytes(self._raw)
+        self._raw.clear()
+        return data
 
     def shutdown_requested(self) -> bool:
         return bool(self._lib.hil_stub_shutdown_requested(self._instance))

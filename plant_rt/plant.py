@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from math import pi
+from math import cos, pi, sin
 
 from plant_rt.circuit import S32, Network
 from plant_rt.dc_link import DcLink
@@ -274,11 +274,17 @@ class Plant:
         k = self.period
         if self._sample_k == k:
             return self._sample
+        th = self._th
         if self._zero_current:
             ia = ib = 0.0
         else:
-            ia, ib, _, _ = self.motor.currents(self._pa, self._pb, self._th)
-        self._sample = self.sensors.read(k, ia, ib, self._vdc, self._revs, self._th, self._flags)
+            m = self.motor
+            e = m.p * th
+            c, s = cos(e), sin(e)
+            i_d = (c * self._pa + s * self._pb - m.psim) * m.ild
+            i_q = (c * self._pb - s * self._pa) * m.ilq
+            ia, ib = c * i_d - s * i_q, s * i_d + c * i_q
+        self._sample = self.sensors.read(k, ia, ib, self._vdc, self._revs, th, self._flags)
         self._sample_k = k
         return self._sample
 

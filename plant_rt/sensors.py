@@ -142,26 +142,31 @@ class AdcChannel:
         return self._top
 
     def convert(self, value: float) -> int:
-        x = self._base + self._scale * value
-        sd = self.noise_rms_counts
-        if sd:
-            i = self._i
-            buf = self._buf
-            if i >= len(buf):
-                buf = self._buf = self._noise.block()
-                i = 0
-            x += sd * buf[i]
-            self._i = i + 1
-        if self.stuck_counts is not None:
-            return self.stuck_counts
-        # int() truncates towards zero; negative codes are clamped to 0 anyway.
-        code = int(x + 0.5)
-        top = self._top
-        return 0 if code < 0 else top if code > top else code
+        """The code for a physical value (consumes one noise draw when noise is on)."""
+        return _code(self, value)
 
     def to_units(self, code: float) -> float:
         """Inverse of the nominal scaling (what a board computes from a code)."""
         return (code - self._offset_counts) * self._units_per_count
+
+
+def _code(ch: AdcChannel, value: float) -> int:
+    x = ch._base + ch._scale * value
+    sd = ch.noise_rms_counts
+    if sd:
+        i = ch._i
+        buf = ch._buf
+        if i >= len(buf):
+            buf = ch._buf = ch._noise.block()
+            i = 0
+        x += sd * buf[i]
+        ch._i = i + 1
+    if ch.stuck_counts is not None:
+        return ch.stuck_counts
+    # int() truncates towards zero; negative codes are clamped to 0 anyway.
+    code = int(x + 0.5)
+    top = ch._top
+    return 0 if code < 0 else top if code > top else code
 
 
 class Encoder:
@@ -228,13 +233,15 @@ class Sensors:
         if v_dc > self.overvoltage_trip_v:
             status |= STATUS_OVERVOLTAGE
         x, y = self._pair
+        c1 = _code(self.i1, i_a if x == 0 else i_b)
+        c2 = _code(self.i2, i_b if y == 1 else i_c)
+        c3 = _code(self.vdc, v_dc)
         enc = self.encoder
-        cpr = enc.counts_per_rev
-        position = revs * cpr + math.floor(theta_m * cpr * _INV_2PI)
-        return _new_sample(SensorSample, (
-            period,
-            self.i1.convert(i_a if x == 0 else i_b),
-            self.i2.convert(i_b if y == 1 else i_c),
-            self.vdc.convert(v_dc),
-            enc.read(position),
-            status))
+        if enc.stuck_counts is not None:
+            count = enc.stuck_counts
+        else:
+            cpr = enc.counts_per_rev
+            position = revs * cpr + math.floor(theta_m * cpr * _INV_2PI)
+            count = ((-position if enc.invert else position) + enc.offset_counts) \
+                & ((1 << enc.counter_bits) - 1)
+        return _new_sample(SensorSample, (period, c1, c2, c3, count, status))

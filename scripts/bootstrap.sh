@@ -14,6 +14,7 @@ declare -A NEEDED=(
   [gcc-arm-none-eabi]=/usr/bin/arm-none-eabi-gcc
   [libnewlib-arm-none-eabi]=/usr/lib/arm-none-eabi/newlib
   [qemu-system-arm]=/usr/bin/qemu-system-arm
+  [socat]=/usr/bin/socat
 )
 missing=()
 for pkg in "${!NEEDED[@]}"; do

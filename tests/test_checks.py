@@ -466,3 +466,30 @@ limits: {high: 150, unit: ms}
     data = r.to_json()
     assert data["measured"] == "inf"
     assert CheckResult.from_json(data).measured == math.inf
+
+
+def test_ramp_lag_of_a_low_pass_filter_is_its_time_constant_and_of_a_delay_its_delay():
+    tau = 1 / (2 * np.pi * 20.0)                    # the stub's 20 Hz filter: 7.96 ms
+    t = _t(0.1)
+    truth = 1500.0 + 2500.0 * t * 30 / np.pi        # a torque-limited ramp in rpm
+    a = 1.0 - np.exp(-DT / tau)
+    filt = np.empty_like(truth)
+    acc = truth[0]
+    for i, x in enumerate(truth):
+        acc += a * (x - acc)
+        filt[i] = acc
+    late = t >= 6 * tau                             # after the filter's transient
+    lag, d = checks.ramp_lag_s(t[late], filt[late], truth[late])
+    assert lag == pytest.approx(tau - DT / 2, rel=5e-3)   # the discrete filter's half-sample
+    assert d["r2"] == pytest.approx(1.0)
+    delayed = np.interp(t - 0.0016, t, truth)
+    assert checks.ramp_lag_s(t[late], delayed[late], truth[late])[0] == pytest.approx(0.0016, rel=1e-6)
+
+
+def test_ramp_lag_refuses_a_window_without_a_ramp():
+    t = _t(0.05)
+    step = np.where(t < 0.025, 0.0, 1.0)
+    with pytest.raises(CheckError, match="not a ramp"):
+        checks.ramp_lag_s(t, step, step)
+    with pytest.raises(CheckError, match="constant"):
+        checks.ramp_lag_s(t, np.ones(len(t)), np.ones(len(t)))

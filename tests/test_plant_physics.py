@@ -150,10 +150,13 @@ def energy_terms(rows: np.ndarray, motor, T: float) -> dict:
 
 @pytest.mark.parametrize("ld,lq,dead_time", [(4.8e-3, 4.8e-3, 0.0), (3.0e-3, 7.0e-3, 0.0),
                                              (4.8e-3, 4.8e-3, 0.5e-6)])
-def test_energy_balance_within_half_a_percent(ld, lq, dead_time):
+def test_energy_balance(ld, lq, dead_time):
     """DC-link energy = copper loss + kinetic energy change + damping + load work (+ the
     change of stored magnetic energy), from rest with a constant plus speed-proportional
-    load. Sinusoidal PWM duties at 10 us (with dead time: diodes conduct every edge)."""
+    load. Sinusoidal PWM duties at 10 us (with dead time: diodes conduct every edge).
+
+    Issue 2 asks for 0.5 %; the balance closes to about 1e-7 without dead time and 5e-5 with
+    it (the trapezoid rule on the sampled truth is the limit), so 0.1 % is asserted."""
     T = 10e-6
     p = profile(timing={"control_period_s": T, "max_step_s": T},
                 motor={"inductance_d_h": ld, "inductance_q_h": lq},
@@ -169,7 +172,7 @@ def test_energy_balance_within_half_a_percent(ld, lq, dead_time):
     e = energy_terms(np.array(rows), p.motor, T)
     assert e["dc"] > 1.0 and e["kinetic"] > 0.2 and e["load"] > 0.1
     out = e["copper"] + e["kinetic"] + e["damping"] + e["load"] + e["magnetic"]
-    assert abs(e["dc"] - out) < 5e-3 * e["dc"]
+    assert abs(e["dc"] - out) < 1e-3 * e["dc"]
 
 
 def test_regeneration_through_diodes_raises_unidirectional_bus_voltage():
@@ -195,10 +198,10 @@ def test_regeneration_through_diodes_raises_unidirectional_bus_voltage():
     returned = -float(np.sum(0.5 * (v[1:] + v[:-1]) * a[1:, F["i_dc"]]) * T)
     stored = 0.5 * 2.0e-3 * (v[-1] ** 2 - v[0] ** 2)
     assert stored > 1.0
-    assert abs(returned - stored) < 5e-3 * stored
+    assert abs(returned - stored) < 1e-6 * stored
     e = energy_terms(a, p.motor, T)
     assert abs((-e["kinetic"] - e["magnetic"]) - (returned + e["copper"] + e["damping"])) \
-        < 5e-3 * returned
+        < 1e-5 * returned
 
 
 # ----------------------------------------------------------------- eq. (6)
@@ -337,16 +340,22 @@ def test_full_period_delay_holds_previous_gates_for_the_whole_period():
 
 
 def test_shoot_through_sets_gate_fault_and_opens_the_leg():
+    """Both switches of leg a on: the driver's desaturation trip turns the leg off, so its
+    positive current falls through the low diode against B and C held high, reaches zero
+    and stays there; SAMPLE reports GATE_FAULT for the period it happened in."""
     p = profile(load={"locked": True})
     plant = Plant(p)
     plant.step(gates=V1)
     assert plant.sample().status & 0x08 == 0
-    plant.step(gates=0x03 | 0x08 | 0x20)               # A high and low together
-    assert plant.sample().status & 0x08
+    assert plant.truth()[F["i_a"]] > 0.3
+    for _ in range(3):
+        plant.step(gates=0x03 | 0x04 | 0x10)          # A high and low, B high, C high
+        assert plant.sample().status & 0x08
     t = plant.truth()
-    assert t[F["i_a"]] == 0.0 or abs(t[F["i_a"]]) < 1e-9 * 100   # leg a tripped open
+    assert (t[F["i_a"]], t[F["i_b"]], t[F["i_c"]]) == (0.0, 0.0, 0.0)
     plant.step(gates=V1)
     assert plant.sample().status & 0x08 == 0
+    assert plant.truth()[F["i_a"]] > 0.3
 
 
 # ------------------------------------------------------------------------ loads

@@ -15,7 +15,10 @@ from protocol.can_mapping import CanReassembler, can_pack
 from protocol.codec import StreamDecoder, encode_frame, encode_payload
 from protocol.can_mapping import COUNTER_NAMES as CAN_COUNTER_NAMES
 from protocol.codec import COUNTER_NAMES
-from test_protocol_fuzz import MESSAGES, SETTINGS
+try:  # tests/ as a package, or as a plain directory on sys.path
+    from tests.test_protocol_fuzz import MESSAGES, SETTINGS
+except ImportError:
+    from test_protocol_fuzz import MESSAGES, SETTINGS
 
 C_DIR = Path(__file__).resolve().parent.parent / "protocol" / "c"
 LIBRARY = C_DIR / "build" / "libhilproto.so"

@@ -3,7 +3,9 @@
  * sample sequence (a rotor turning at 150 rad/s with a rotating 8 A current
  * and its encoder) in one speed-source mode.
  *
- *   step_driver MODE STEPS    MODE 0 encoder, 1 conventional, 2 EKF
+ *   step_driver MODE STEPS [TELEMETRY_EVERY]
+ *     MODE 0 encoder, 1 conventional, 2 EKF; telemetry filled every
+ *     TELEMETRY_EVERY steps (default 1: every step; 0: never)
  *
  * The samples are generated before the timed loop, so counting only inside
  * ctl_step (callgrind --toggle-collect=ctl_step) or subtracting a STEPS = 0
@@ -21,12 +23,13 @@ static hil_sample samples[MAX_STEPS];
 
 int main(int argc, char **argv)
 {
-    if (argc != 3) {
-        fprintf(stderr, "usage: step_driver MODE STEPS\n");
+    if (argc != 3 && argc != 4) {
+        fprintf(stderr, "usage: step_driver MODE STEPS [TELEMETRY_EVERY]\n");
         return 2;
     }
     int mode = atoi(argv[1]);
     int steps = atoi(argv[2]);
+    int telemetry_every = argc == 4 ? atoi(argv[3]) : 1;
     if (mode < 0 || mode > 2 || steps < 0 || steps > MAX_STEPS) {
         fprintf(stderr, "step_driver: MODE in 0..2, STEPS in 0..%d\n", MAX_STEPS);
         return 2;
@@ -53,7 +56,9 @@ int main(int argc, char **argv)
     hil_telemetry tm;
     unsigned gates_or = 0;
     for (int k = 0; k < steps; ++k) {
-        gates_or |= ctl_step(&c, &samples[k], &tm);
+        /* with telemetry every `telemetry_every` steps (0: never) */
+        int with_tm = telemetry_every > 0 && k % telemetry_every == 0;
+        gates_or |= ctl_step(&c, &samples[k], with_tm ? &tm : NULL);
     }
     /* keep the results live and check the drive kept switching */
     printf("state %u gates %02x\n", (unsigned)c.st.state, gates_or);

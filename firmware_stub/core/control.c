@@ -47,7 +47,6 @@ void ctl_params_default(ctl_params *p)
     p->overcurrent_a = CTL_DEFAULT_OVERCURRENT_A;
     p->encoder_loss_timeout_s = CTL_DEFAULT_ENCODER_LOSS_TIMEOUT_S;
     p->encoder_loss_min_speed_rad_s = CTL_DEFAULT_ENCODER_LOSS_MIN_SPEED_RAD_S;
-    p->encoder_window_periods = CTL_DEFAULT_ENCODER_WINDOW_PERIODS;
 }
 
 void ctl_derive(ctl *c)
@@ -59,6 +58,7 @@ void ctl_derive(ctl *c)
     k->clarke.current_a_per_count = p->current_a_per_count;
     k->clarke.current_offset_counts = p->current_offset_counts;
     k->clarke.phases = p->current_phases;
+    clarke_derive(&k->clarke);
 
     k->flux.stator_resistance_ohm = p->stator_resistance_ohm;
     k->flux.stator_inductance_h = p->stator_inductance_h;
@@ -68,17 +68,19 @@ void ctl_derive(ctl *c)
     fluxobs_derive(&k->flux);
 
     k->flux_hyst.band = p->flux_band_wb;
+    hyst_derive(&k->flux_hyst);
     k->torque_hyst.band = p->torque_band_nm;
+    hyst_derive(&k->torque_hyst);
 
     k->pi.kp_nm_per_rad_s = p->speed_kp_nm_per_rad_s;
     k->pi.ki_nm_per_rad = p->speed_ki_nm_per_rad;
     k->pi.torque_limit_nm = p->torque_limit_nm;
     k->pi.control_period_s = t;
+    spi_derive(&k->pi);
 
     k->enc.counts_per_rev = p->encoder_counts_per_rev;
     k->enc.pole_pairs = p->pole_pairs;
     k->enc.control_period_s = t;
-    k->enc.window_periods = p->encoder_window_periods;
     enc_derive(&k->enc);
 
     k->conv.control_period_s = t;
@@ -99,6 +101,7 @@ void ctl_derive(ctl *c)
     k->prot.encoder_loss_timeout_s = p->encoder_loss_timeout_s;
     k->prot.encoder_loss_min_speed_rad_s = p->encoder_loss_min_speed_rad_s;
     k->prot.control_period_s = t;
+    prot_derive(&k->prot);
 
     k->vdc_v_per_count = p->vdc_v_per_count;
     k->vdc_offset_counts = p->vdc_offset_counts;
@@ -106,6 +109,12 @@ void ctl_derive(ctl *c)
     k->inv_pole_pairs = 1.0f / p->pole_pairs;
     k->magnet_flux_wb = p->magnet_flux_wb;
     k->stator_inductance_h = p->stator_inductance_h;
+    for (uint8_t col = 0; col < 4u; ++col) {
+        k->vector_of[0][col] = 0u;
+        for (uint8_t sector = 1; sector <= 6u; ++sector) {
+            k->vector_of[sector][col] = swtab_vector(sector, col < 2u, (col & 1u) == 0u);
+        }
+    }
 }
 
 void ctl_init(ctl *c)
@@ -119,8 +128,9 @@ void ctl_init(ctl *c)
     c->cmd.speed_ref_rad_s = 0.0f;
     c->cmd.torque_ref_nm = 0.0f;
     c->cmd.flux_ref_wb = 0.0f;
+    c->flux_ref_wb = c->params.flux_ref_wb;
     c->st.started = 0u;
-    c->st.gates_prev = 0u;
+    c->st.vector_prev = 0u;
     c->st.state = HIL_STATE_IDLE;
     c->st.fault_code = HIL_FAULT_NONE;
     c->st.fault_value = 0.0f;
@@ -143,6 +153,7 @@ int ctl_set_command(ctl *c, const hil_command *cmd)
     c->cmd.speed_ref_rad_s = cmd->speed_ref_rad_s;
     c->cmd.torque_ref_nm = cmd->torque_ref_nm;
     c->cmd.flux_ref_wb = cmd->flux_ref_wb;
+    c->flux_ref_wb = cmd->flux_ref_wb > 0.0f ? cmd->flux_ref_wb : c->params.flux_ref_wb;
     ctl_state *st = &c->st;
     if (!c->cmd.enable) {
         st->state = HIL_STATE_IDLE;
@@ -165,7 +176,7 @@ static void track_encoder(ctl *c, const clarke_out *i)
     const ctl_cfg *k = &c->cfg;
     ctl_state *st = &c->st;
     float s, co;
-    fm_sincos(st->enc.theta_e_rad, &s, &co);
+    fm_sincos(enc_angle_e(&k->enc, &st->enc), &s, &co);
     float pa = k->magnet_flux_wb * co + k->stator_inductance_h * i->i_alpha_a;
     float pb = k->magnet_flux_wb * s + k->stator_inductance_h * i->i_beta_a;
     fluxobs_reset(&st->flux, pa, pb, i->i_alpha_a, i->i_beta_a);
@@ -186,19 +197,18 @@ uint8_t ctl_step(ctl *c, const hil_sample *s, hil_telemetry *tm)
     clarke_from_adc(&k->clarke, s->adc_i1, s->adc_i2, &i);
     float vdc_v = ((float)s->adc_vdc - k->vdc_offset_counts) * k->vdc_v_per_count;
 
-    uint8_t fresh = !st->started;
-    if (fresh) {
+    uint8_t running = st->state == HIL_STATE_RUNNING;
+    if (st->started) {
+        enc_step(&k->enc, &st->enc, s->encoder);
+    } else {
         enc_reset(&k->enc, &st->enc, s->encoder);
         prot_reset(&st->prot, s->encoder);
         st->started = 1u;
-    } else {
-        enc_step(&k->enc, &st->enc, s->encoder);
+        running = 0u; /* no previous sample to integrate from: initialise below */
     }
-
-    uint8_t running = st->state == HIL_STATE_RUNNING;
-    if (running && !fresh) {
+    if (running) {
         float ua, ub;
-        vsi_voltage(st->gates_prev, vdc_v, &ua, &ub);
+        vsi_voltage_of_vector(st->vector_prev, vdc_v, &ua, &ub);
         fluxobs_step(&k->flux, &st->flux, ua, ub, i.i_alpha_a, i.i_beta_a);
     } else {
         track_encoder(c, &i);
@@ -208,23 +218,19 @@ uint8_t ctl_step(ctl *c, const hil_sample *s, hil_telemetry *tm)
     float mag = flux_magnitude(pa, pb);                                               /* eq. (5) */
     float torque = torque_estimate(k->pole_pairs, pa, pb, i.i_alpha_a, i.i_beta_a); /* eq. (6) */
     float theta_s = fm_atan2(pb, pa);                                                 /* eq. (10) */
-    conv_step(&k->conv, &st->conv, theta_s);
-    float inv_mag = mag > 1e-9f ? 1.0f / mag : 0.0f;
-    ekf_step(&k->ekf, &st->ekf, pa * inv_mag, pb * inv_mag);
-    float delta = rotor_load_angle(&k->rotor, torque, mag);
+    conv_step(&k->conv, &st->conv, theta_s);                                          /* eq. (11) */
+    ekf_step_angle(&k->ekf, &st->ekf, theta_s);                                       /* eq. (20)-(23) */
 
     float ip = k->inv_pole_pairs;
-    float speed_raw = st->conv.speed_raw_rad_s * ip;
-    float speed_lpf = st->conv.speed_lpf_rad_s * ip;
     float speed_ekf = st->ekf.speed_rad_s * ip;
-    float speed_enc = st->enc.speed_rad_s;
+    float speed_lpf = st->conv.speed_lpf_rad_s * ip;
     uint8_t source = c->cmd.speed_source;
-    float feedback = source == HIL_SPEED_ENCODER ? speed_enc : (source == HIL_SPEED_CONVENTIONAL ? speed_lpf : speed_ekf);
+    float feedback = source == HIL_SPEED_EKF ? speed_ekf : (source == HIL_SPEED_CONVENTIONAL ? speed_lpf : st->enc.speed_rad_s);
 
-    uint8_t gates = 0u;
+    uint8_t vector = 0u;
     uint8_t sector = 0u;
     float torque_ref = 0.0f;
-    if (running) {
+    if (st->state == HIL_STATE_RUNNING) {
         float value = 0.0f;
         uint8_t fault = prot_hardware(&k->prot, i.i_peak_a, vdc_v, s->status, &value);
         if (fault == PROT_FAULT_NONE) {
@@ -242,32 +248,37 @@ uint8_t ctl_step(ctl *c, const hil_sample *s, hil_telemetry *tm)
             } else {
                 torque_ref = spi_step(&k->pi, &st->pi, c->cmd.speed_ref_rad_s, feedback);
             }
-            float flux_ref = c->cmd.flux_ref_wb > 0.0f ? c->cmd.flux_ref_wb : c->params.flux_ref_wb;
-            uint8_t flux_up = hyst_step(&k->flux_hyst, &st->flux_hyst, flux_ref, mag);
+            uint8_t flux_up = hyst_step(&k->flux_hyst, &st->flux_hyst, c->flux_ref_wb, mag);
             uint8_t torque_up = hyst_step(&k->torque_hyst, &st->torque_hyst, torque_ref, torque);
             sector = swtab_sector(pa, pb);
-            gates = vsi_gates_of_vector(swtab_vector(sector, flux_up, torque_up));
+            vector = k->vector_of[sector][(flux_up ? 0u : 2u) + (torque_up ? 0u : 1u)]; /* Table 3 */
         }
     }
-    st->gates_prev = gates;
+    st->vector_prev = vector;
+    uint8_t gates = vsi_gates_of_vector(vector);
+    if (tm == NULL) {
+        return gates;
+    }
 
+    float delta = rotor_load_angle(&k->rotor, torque, mag); /* eq. (25) */
+    float ekf_angle = fm_wrap_pi(st->ekf.theta_filtered_rad);
     tm->period = s->period;
     tm->sector = sector;
     tm->speed_source = source;
     tm->state = st->state;
     tm->gates = gates;
     tm->speed_feedback_rad_s = feedback;
-    tm->speed_encoder_rad_s = speed_enc;
-    tm->speed_raw_rad_s = speed_raw;
+    tm->speed_encoder_rad_s = st->enc.speed_rad_s;
+    tm->speed_raw_rad_s = st->conv.speed_raw_rad_s * ip;
     tm->speed_lpf_rad_s = speed_lpf;
     tm->speed_ekf_rad_s = speed_ekf;
     tm->flux_angle_rad = theta_s;
-    tm->ekf_angle_rad = st->ekf.theta_filtered_rad;
+    tm->ekf_angle_rad = ekf_angle;
     tm->flux_mag_wb = mag;
     tm->torque_est_nm = torque;
     tm->torque_ref_nm = torque_ref;
-    tm->rotor_pos_conv_rad = fm_wrap_pi(theta_s - delta);                    /* eq. (26) */
-    tm->rotor_pos_ekf_rad = fm_wrap_pi(st->ekf.theta_filtered_rad - delta); /* eq. (26) */
+    tm->rotor_pos_conv_rad = fm_wrap_pi(theta_s - delta);      /* eq. (26) */
+    tm->rotor_pos_ekf_rad = fm_wrap_pi(ekf_angle - delta);    /* eq. (26) */
     return gates;
 }
 
@@ -395,6 +406,7 @@ uint8_t ctl_param_set(ctl *c, uint16_t id, float value, float *value_now)
     }
     write_field(&c->params, d, value);
     ctl_derive(c);
+    c->flux_ref_wb = c->cmd.flux_ref_wb > 0.0f ? c->cmd.flux_ref_wb : c->params.flux_ref_wb;
     *value_now = read_field(&c->params, d);
     return HIL_PARAM_OK;
 }

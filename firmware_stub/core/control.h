@@ -29,8 +29,8 @@
 #include "switching_table.h"
 #include "vsi.h"
 
-/* Everything the bench can set with PARAM_SET (SI units), plus two values that
- * are not on the wire (last two). */
+/* Everything the bench can set with PARAM_SET (SI units), plus one value that
+ * is not on the wire (the last). */
 typedef struct {
     float control_period_s;
     float current_a_per_count;
@@ -58,7 +58,6 @@ typedef struct {
     float overcurrent_a;
     float encoder_loss_timeout_s;
     float encoder_loss_min_speed_rad_s;
-    uint16_t encoder_window_periods;
 } ctl_params;
 
 /* Block configurations derived from ctl_params by ctl_derive(). */
@@ -79,6 +78,10 @@ typedef struct {
     float inv_pole_pairs;
     float magnet_flux_wb;
     float stator_inductance_h;
+    /* Table 3 composed with the gate bits: [sector 0..6][column], where the
+     * column is (flux_up ? 0 : 2) + (torque_up ? 0 : 1) as in Table 3 and
+     * sector 0 (not switching) gives 0 */
+    uint8_t vector_of[7][4];
 } ctl_cfg;
 
 typedef struct {
@@ -100,7 +103,7 @@ typedef struct {
     ekf_state ekf;
     prot_state prot;
     uint8_t started;    /* first SAMPLE seen */
-    uint8_t gates_prev; /* applied during the period that just ended */
+    uint8_t vector_prev; /* voltage vector 0..6 applied during the period that just ended */
     uint8_t state;      /* hil_state */
     uint8_t fault_code; /* hil_fault_code latched */
     float fault_value;
@@ -112,6 +115,7 @@ typedef struct {
     ctl_params params;
     ctl_cfg cfg;
     ctl_command cmd;
+    float flux_ref_wb; /* in force: the command's, or params.flux_ref_wb when it gives none */
     ctl_state st;
 } ctl;
 
@@ -126,8 +130,9 @@ void ctl_derive(ctl *c);
  * (command ignored) for an unknown speed source. */
 int ctl_set_command(ctl *c, const hil_command *cmd);
 
-/* One control period. Returns the gates to apply until the next SAMPLE and
- * fills *tm (every field, every step). */
+/* One control period. Returns the gates to apply until the next SAMPLE. With
+ * tm not NULL, also fills every telemetry field, including the telemetry-only
+ * rotor position of eq. (24)-(26); the estimators run every step either way. */
 uint8_t ctl_step(ctl *c, const hil_sample *s, hil_telemetry *tm);
 
 /* PARAM_SET / PARAM_GET by hil_param_id. Return a hil_param_status; *value is

@@ -32,7 +32,6 @@
 #define CTL_DEFAULT_OVERCURRENT_A 20.0f      /* 1.4 x the 14.4 A of the torque limit, inside the 25 A ADC range */
 #define CTL_DEFAULT_ENCODER_LOSS_TIMEOUT_S 0.01f
 #define CTL_DEFAULT_ENCODER_LOSS_MIN_SPEED_RAD_S 10.0f
-#define CTL_DEFAULT_ENCODER_WINDOW_PERIODS 64u
 
 /* python -m hil.ekf_design (DLQE by the discrete Riccati equation):
  * sigma_v = 0.0136077 rad, sigma_w = 0.00625 rad/s per period; estimator poles

@@ -20,13 +20,6 @@
 #define FM_W1 (-0.16665680706501007f)
 #define FM_W2 0.008312366902828217f
 #define FM_W3 (-0.00018492189701646566f)
-/* atan(z) = z (A0 + z^2 (A1 + ... z^2 A5)) on [0, 1], error 1.7e-6 */
-#define FM_A0 0.9999772310256958f
-#define FM_A1 (-0.33262282609939575f)
-#define FM_A2 0.19354042410850525f
-#define FM_A3 (-0.11642659455537796f)
-#define FM_A4 0.05264747887849808f
-#define FM_A5 (-0.01171918585896492f)
 /* asin(x) = pi/2 - sqrt(1 - x) (B0 + x (B1 + ... x B5)) on [0, 1], error 6.7e-7 */
 #define FM_B0 1.5707956552505493f
 #define FM_B1 (-0.21454279124736786f)
@@ -74,27 +67,6 @@ float fm_sin(float theta_rad)
     }
     float r2 = r * r;
     return r + r * r2 * (FM_W1 + r2 * (FM_W2 + r2 * FM_W3));
-}
-
-float fm_atan2(float y, float x)
-{
-    float ax = fabsf(x);
-    float ay = fabsf(y);
-    float hi = ax > ay ? ax : ay;
-    float lo = ax > ay ? ay : ax;
-    if (hi == 0.0f) {
-        return 0.0f;
-    }
-    float z = lo / hi;
-    float z2 = z * z;
-    float a = z * (FM_A0 + z2 * (FM_A1 + z2 * (FM_A2 + z2 * (FM_A3 + z2 * (FM_A4 + z2 * FM_A5)))));
-    if (ay > ax) {
-        a = FM_HALF_PI - a;
-    }
-    if (x < 0.0f) {
-        a = FM_PI - a;
-    }
-    return y < 0.0f ? -a : a;
 }
 
 float fm_asin(float x)

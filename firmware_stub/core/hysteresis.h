@@ -10,13 +10,15 @@
 #include <stdint.h>
 
 typedef struct {
-    float band; /* total width: flux_band_wb or torque_band_nm */
+    float band;      /* total width: flux_band_wb or torque_band_nm */
+    float half_band; /* derived by hyst_derive() */
 } hyst_cfg;
 
 typedef struct {
     uint8_t out; /* last output, 1 = increase */
 } hyst_state;
 
+void hyst_derive(hyst_cfg *cfg);
 uint8_t hyst_step(const hyst_cfg *cfg, hyst_state *st, float ref, float value);
 
 #endif

@@ -1,8 +1,16 @@
 #include "protection.h"
 
+#include <math.h>
+
+void prot_derive(prot_cfg *cfg)
+{
+    float n = cfg->encoder_loss_timeout_s / cfg->control_period_s;
+    cfg->encoder_loss_timeout_periods = n < 4e9f ? (uint32_t)(n + 0.5f) : 4000000000u;
+}
+
 void prot_reset(prot_state *st, uint16_t count)
 {
-    st->frozen_s = 0.0f;
+    st->frozen_periods = 0u;
     st->last_count = count;
 }
 
@@ -22,14 +30,13 @@ uint8_t prot_hardware(const prot_cfg *cfg, float i_peak_a, float vdc_v, uint8_t 
 uint8_t prot_encoder_loss(const prot_cfg *cfg, prot_state *st, uint16_t count, float flux_speed_rad_s,
                           int encoder_selected, float *value)
 {
-    float speed = flux_speed_rad_s < 0.0f ? -flux_speed_rad_s : flux_speed_rad_s;
+    float speed = fabsf(flux_speed_rad_s);
     if (!encoder_selected || count != st->last_count || speed < cfg->encoder_loss_min_speed_rad_s) {
-        st->frozen_s = 0.0f;
+        st->frozen_periods = 0u;
         st->last_count = count;
         return PROT_FAULT_NONE;
     }
-    st->frozen_s += cfg->control_period_s;
-    if (st->frozen_s > cfg->encoder_loss_timeout_s) {
+    if (++st->frozen_periods > cfg->encoder_loss_timeout_periods) {
         *value = flux_speed_rad_s;
         return PROT_FAULT_ENCODER_LOSS;
     }

@@ -19,10 +19,11 @@ typedef struct {
     float encoder_loss_timeout_s;
     float encoder_loss_min_speed_rad_s; /* mechanical */
     float control_period_s;
+    uint32_t encoder_loss_timeout_periods; /* derived by prot_derive() */
 } prot_cfg;
 
 typedef struct {
-    float frozen_s;      /* time the counter has been still while the flux says it turns */
+    uint32_t frozen_periods; /* periods the counter has been still while the flux says it turns */
     uint16_t last_count;
 } prot_state;
 
@@ -37,6 +38,7 @@ typedef struct {
 #define PROT_FAULT_ENCODER_LOSS 2u
 #define PROT_FAULT_DC_LINK 3u
 
+void prot_derive(prot_cfg *cfg);
 void prot_reset(prot_state *st, uint16_t count);
 /* Returns a PROT_FAULT_* code (0 = none) and the tripping value in *value:
  * the peak phase current (A) or the DC-link voltage (V). */

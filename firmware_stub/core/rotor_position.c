@@ -1,7 +1,5 @@
 #include "rotor_position.h"
 
-#include <math.h>
-
 #include "fastmath.h"
 
 #define ROTOR_MIN_FLUX_WB 1e-6f
@@ -17,7 +15,5 @@ float rotor_load_angle(const rotor_cfg *cfg, float torque_nm, float flux_mag_wb)
     if (flux_mag_wb < ROTOR_MIN_FLUX_WB) {
         return 0.0f;
     }
-    float x = cfg->sin_delta_per_nm_wb * torque_nm / flux_mag_wb;
-    x = x > 1.0f ? 1.0f : (x < -1.0f ? -1.0f : x);
-    return fm_atan2(x, sqrtf(1.0f - x * x)); /* asin(x) */
+    return fm_asin(cfg->sin_delta_per_nm_wb * torque_nm / flux_mag_wb);
 }

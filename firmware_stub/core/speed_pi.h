@@ -16,13 +16,17 @@ typedef struct {
     float ki_nm_per_rad;
     float torque_limit_nm;
     float control_period_s;
+    float ki_per_step_nm_per_rad_s; /* Ki T, derived by spi_derive() */
 } spi_cfg;
 
 typedef struct {
     float integral_nm;
 } spi_state;
 
-/* Speeds in mechanical rad/s; returns the torque reference in Nm. */
+void spi_derive(spi_cfg *cfg);
+/* Speeds in mechanical rad/s; returns the torque reference in Nm. While the
+ * output is saturated and the error pushes further, it returns the limit and
+ * leaves the integrator alone. */
 float spi_step(const spi_cfg *cfg, spi_state *st, float speed_ref_rad_s, float speed_meas_rad_s);
 
 #endif

@@ -30,3 +30,13 @@ void vsi_voltage(uint8_t gates, float vdc_v, float *u_alpha_v, float *u_beta_v)
     *u_alpha_v = unit_alpha[idx] * vdc_v;
     *u_beta_v = unit_beta[idx] * vdc_v;
 }
+
+/* Table 2 divided by Vdc, by vector number (0: all off). */
+static const float vector_alpha[7] = {0.0f, 2.0f / 3.0f, 1.0f / 3.0f, -1.0f / 3.0f, -2.0f / 3.0f, -1.0f / 3.0f, 1.0f / 3.0f};
+static const float vector_beta[7] = {0.0f, 0.0f, FM_INV_SQRT3, FM_INV_SQRT3, 0.0f, -FM_INV_SQRT3, -FM_INV_SQRT3};
+
+void vsi_voltage_of_vector(uint8_t vector, float vdc_v, float *u_alpha_v, float *u_beta_v)
+{
+    *u_alpha_v = vector_alpha[vector] * vdc_v;
+    *u_beta_v = vector_beta[vector] * vdc_v;
+}

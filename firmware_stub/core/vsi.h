@@ -28,4 +28,8 @@ uint8_t vsi_gates_of_vector(uint8_t vector);
  * the controller never sends that while running. */
 void vsi_voltage(uint8_t gates, float vdc_v, float *u_alpha_v, float *u_beta_v);
 
+/* The same from the vector number, which must be 0..6 (0: all off): one table
+ * lookup, no check, for the control step. */
+void vsi_voltage_of_vector(uint8_t vector, float vdc_v, float *u_alpha_v, float *u_beta_v);
+
 #endif

@@ -65,12 +65,45 @@ static void atan2_axes_and_origin(void **state)
 {
     (void)state;
     assert_true(fm_atan2(0.0f, 0.0f) == 0.0f);
-    assert_near(fm_atan2(0.0f, 1.0f), 0.0, 1e-7);
-    assert_near(fm_atan2(1.0f, 0.0f), PI_D / 2, 1e-6);
-    assert_near(fm_atan2(-1.0f, 0.0f), -PI_D / 2, 1e-6);
-    assert_near(fm_atan2(0.0f, -1.0f), PI_D, 1e-6);
-    assert_near(fm_atan2(1.0f, 1.0f), PI_D / 4, 1e-6);
-    assert_near(fm_atan2(-1.0f, -1.0f), -3 * PI_D / 4, 1e-6);
+    const double e = FM_ATAN2_MAX_ERR;
+    assert_near(fm_atan2(0.0f, 1.0f), 0.0, e);
+    assert_near(fm_atan2(1.0f, 0.0f), PI_D / 2, e);
+    assert_near(fm_atan2(-1.0f, 0.0f), -PI_D / 2, e);
+    assert_near(fm_atan2(0.0f, -1.0f), PI_D, e);
+    assert_near(fm_atan2(1.0f, 1.0f), PI_D / 4, e);
+    assert_near(fm_atan2(-1.0f, -1.0f), -3 * PI_D / 4, e);
+    assert_near(fm_atan2(-1e-30f, -1.0f), -PI_D, e); /* just below the negative x axis */
+}
+
+static void sin_error_bound(void **state)
+{
+    (void)state;
+    double worst = 0.0;
+    for (int n = -400000; n <= 400000; ++n) {
+        float th = (float)(4.0 * PI_D * n / 400000.0);
+        worst = fmax(worst, fabs((double)fm_sin(th) - sin((double)th)));
+    }
+    if (!(worst <= FM_SIN_MAX_ERR)) {
+        fail_msg("sin worst error %.3g above bound %.3g", worst, (double)FM_SIN_MAX_ERR);
+    }
+    assert_true(worst > 1e-7);
+}
+
+static void asin_error_bound(void **state)
+{
+    (void)state;
+    double worst = 0.0;
+    for (int n = -200000; n <= 200000; ++n) {
+        float x = (float)(n / 200000.0);
+        worst = fmax(worst, fabs((double)fm_asin(x) - asin((double)x)));
+    }
+    if (!(worst <= FM_ASIN_MAX_ERR)) {
+        fail_msg("asin worst error %.3g above bound %.3g", worst, (double)FM_ASIN_MAX_ERR);
+    }
+    assert_true(worst > 1e-7);
+    /* clamped outside [-1, 1] */
+    assert_near(fm_asin(1.5f), PI_D / 2, FM_ASIN_MAX_ERR);
+    assert_near(fm_asin(-7.0f), -PI_D / 2, FM_ASIN_MAX_ERR);
 }
 
 static void wrap_into_range(void **state)
@@ -94,6 +127,8 @@ int main(void)
         cmocka_unit_test(sincos_quadrants_exact_points),
         cmocka_unit_test(atan2_error_bound),
         cmocka_unit_test(atan2_axes_and_origin),
+        cmocka_unit_test(sin_error_bound),
+        cmocka_unit_test(asin_error_bound),
         cmocka_unit_test(wrap_into_range),
     };
     return cmocka_run_group_tests_name("fastmath", tests, NULL, NULL);

@@ -5,7 +5,8 @@
 static void switches_at_band_edges_and_holds_inside(void **state)
 {
     (void)state;
-    hyst_cfg cfg = {0.2f};
+    hyst_cfg cfg = {0.2f, 0.0f};
+    hyst_derive(&cfg);
     hyst_state st = {1u};
     const float ref = 1.0f;
     assert_int_equal(hyst_step(&cfg, &st, ref, 0.5f), 1);
@@ -20,7 +21,8 @@ static void switches_at_band_edges_and_holds_inside(void **state)
 static void zero_band_is_a_plain_comparator(void **state)
 {
     (void)state;
-    hyst_cfg cfg = {0.0f};
+    hyst_cfg cfg = {0.0f, 0.0f};
+    hyst_derive(&cfg);
     hyst_state st = {0u};
     assert_int_equal(hyst_step(&cfg, &st, 0.0f, -1e-6f), 1);
     assert_int_equal(hyst_step(&cfg, &st, 0.0f, 1e-6f), 0);
@@ -32,7 +34,8 @@ static void ripple_of_a_triangle_follows_band(void **state)
     (void)state;
     /* a value driven up or down by a fixed slope under the comparator stays
      * within the band plus one step on each side */
-    hyst_cfg cfg = {0.1f};
+    hyst_cfg cfg = {0.1f, 0.0f};
+    hyst_derive(&cfg);
     hyst_state st = {1u};
     float v = 0.0f, lo = 1e9f, hi = -1e9f;
     const float step = 0.01f;

@@ -2,7 +2,21 @@
 #include "check.h"
 #include "speed_pi.h"
 
-static const spi_cfg CFG = {0.05f, 0.8f, 2.0f, 50e-6f};
+static spi_cfg make_cfg(float kp, float ki)
+{
+    spi_cfg cfg = {kp, ki, 2.0f, 50e-6f, 0.0f};
+    spi_derive(&cfg);
+    return cfg;
+}
+
+static spi_cfg CFG;
+
+static int setup(void **state)
+{
+    (void)state;
+    CFG = make_cfg(0.05f, 0.8f);
+    return 0;
+}
 
 static void proportional_plus_integral(void **state)
 {
@@ -58,7 +72,7 @@ static void integral_clamped_to_limit(void **state)
     spi_state st = {0.0f};
     /* small error that never saturates the output through Kp, for long enough
      * that Ki T e summed exceeds the limit */
-    const spi_cfg cfg = {0.0f, 100.0f, 2.0f, 50e-6f};
+    const spi_cfg cfg = make_cfg(0.0f, 100.0f);
     for (int n = 0; n < 20000; ++n) {
         spi_step(&cfg, &st, 1.0f, 0.0f);
     }
@@ -80,5 +94,5 @@ int main(void)
         cmocka_unit_test(saturated_by_kp_alone_freezes_integrator),
         cmocka_unit_test(integral_clamped_to_limit),
     };
-    return cmocka_run_group_tests_name("speed_pi", tests, NULL, NULL);
+    return cmocka_run_group_tests_name("speed_pi", tests, setup, NULL);
 }

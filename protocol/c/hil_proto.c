@@ -506,6 +506,55 @@ int hil_decoder_feed(hil_decoder *d, uint8_t byte, hil_msg *out)
     return result;
 }
 
+size_t hil_decoder_feed_buf(hil_decoder *d, const uint8_t *data, size_t len, hil_msg *out, int *got)
+{
+    /* hil_decoder_feed with the per-byte state in locals: the non-delimiter bytes of a frame
+     * are the whole cost, and they touch nothing else. */
+    size_t i = 0;
+    *got = 0;
+    while (i < len) {
+        if (data[i] == 0u || d->overflow) {
+            int done = hil_decoder_feed(d, data[i++], out);
+            if (done) {
+                *got = 1;
+                return i;
+            }
+            continue;
+        }
+        size_t n = d->len;
+        size_t enc = d->encoded_len;
+        uint8_t left = d->cobs_left;
+        uint8_t zero = d->cobs_zero;
+        uint8_t *buf = d->buf;
+        while (i < len && data[i] != 0u) {
+            uint8_t byte = data[i];
+            if (enc >= HIL_MAX_ENCODED_SEGMENT) {
+                d->overflow = 1;
+                break;
+            }
+            enc++;
+            i++;
+            if (left == 0u) {
+                if (zero && n < sizeof d->buf) {
+                    buf[n++] = 0u;
+                }
+                left = (uint8_t)(byte - 1u);
+                zero = byte != 0xFFu;
+            } else {
+                if (n < sizeof d->buf) {
+                    buf[n++] = byte;
+                }
+                left--;
+            }
+        }
+        d->len = n;
+        d->encoded_len = enc;
+        d->cobs_left = left;
+        d->cobs_zero = zero;
+    }
+    return i;
+}
+
 /* ------------------------------------------------------------------ CAN */
 
 #define CAN_ID_MAX 0x7FFu

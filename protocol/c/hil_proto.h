@@ -275,6 +275,11 @@ typedef struct {
 void hil_decoder_init(hil_decoder *dec);
 /* Feeds one byte. Returns 1 and fills *out when the byte completes a valid frame, else 0. */
 int hil_decoder_feed(hil_decoder *dec, uint8_t byte, hil_msg *out);
+/* Same decoder, a buffer at a time (fewer instructions per byte, e.g. from a UART DMA buffer).
+ * Consumes bytes up to and including the first one that completes a valid frame, or all of
+ * them. Returns the number of bytes consumed; *got is 1 when *out was filled, else 0. Call
+ * again with the rest of the buffer until it is consumed. */
+size_t hil_decoder_feed_buf(hil_decoder *dec, const uint8_t *data, size_t len, hil_msg *out, int *got);
 
 /* CAN mapping (classic CAN, 11-bit identifiers):
  * id = base_id + 0x20 * sender_role + type. SAMPLE, GATES and DUTY fit one

@@ -5,6 +5,10 @@
  * Prints one JSON object.
  *
  *   hil_codec_bench [ITERATIONS [BATCHES]]
+ *   hil_codec_bench --only OP ITERATIONS    runs one operation untimed, for instruction
+ *                                           counting under valgrind --tool=callgrind
+ *                                           (OP: sample_encode, sample_decode,
+ *                                           sample_decode_bytewise, gates_...)
  */
 #define _POSIX_C_SOURCE 199309L
 #include <stdio.h>
@@ -54,6 +58,23 @@ static void op_decode(const hil_msg *m, long iterations)
     hil_decoder_init(&dec);
     hil_msg out;
     for (long i = 0; i < iterations; i++) {
+        int got;
+        sink += (uint32_t)hil_decoder_feed_buf(&dec, frame, (size_t)n, &out, &got);
+        sink += (uint32_t)got;
+    }
+    sink += dec.frames_ok;
+}
+
+static void op_decode_bytewise(const hil_msg *m, long iterations)
+{
+    uint8_t frame[HIL_MAX_ENCODED_FRAME];
+    hil_msg local = *m;
+    local.seq = 0;
+    int n = hil_frame_encode(&local, frame, sizeof frame);
+    hil_decoder dec;
+    hil_decoder_init(&dec);
+    hil_msg out;
+    for (long i = 0; i < iterations; i++) {
         for (int k = 0; k < n; k++) {
             sink += (uint32_t)hil_decoder_feed(&dec, frame[k], &out);
         }
@@ -77,7 +98,7 @@ static void op_can_roundtrip(const hil_msg *m, long iterations)
 
 static double median_ns(op_fn op, const hil_msg *m, long iterations, int batches)
 {
-    double per[MAX_BATCHES];
+    double per[MAX_BATCHES] = {0};
     op(m, iterations / 10 + 1); /* warm-up */
     for (int b = 0; b < batches; b++) {
         double t0 = now_ns();
@@ -90,6 +111,31 @@ static double median_ns(op_fn op, const hil_msg *m, long iterations, int batches
 
 int main(int argc, char **argv)
 {
+    if (argc == 4 && strcmp(argv[1], "--only") == 0) {
+        hil_msg m;
+        memset(&m, 0, sizeof m);
+        long n = atol(argv[3]);
+        int is_sample = strncmp(argv[2], "sample_", 7) == 0;
+        if (is_sample) {
+            m.type = HIL_MSG_SAMPLE;
+            m.u.sample = (hil_sample){123456u, 2048u, 1000u, 3000u, 65000u, 5u};
+        } else {
+            m.type = HIL_MSG_GATES;
+            m.u.gates = (hil_gates){123456u, 0x21u};
+        }
+        const char *op = argv[2] + (is_sample ? 7 : 6);
+        if (strcmp(op, "encode") == 0) {
+            op_encode(&m, n);
+        } else if (strcmp(op, "decode") == 0) {
+            op_decode(&m, n);
+        } else if (strcmp(op, "decode_bytewise") == 0) {
+            op_decode_bytewise(&m, n);
+        } else {
+            fprintf(stderr, "unknown operation %s\n", argv[2]);
+            return 2;
+        }
+        return 0;
+    }
     long iterations = argc > 1 ? atol(argv[1]) : 200000;
     int batches = argc > 2 ? atoi(argv[2]) : 7;
     if (iterations < 1 || batches < 1 || batches > MAX_BATCHES) {
@@ -111,17 +157,19 @@ int main(int argc, char **argv)
 
     double se = median_ns(op_encode, &sample, iterations, batches);
     double sd = median_ns(op_decode, &sample, iterations, batches);
+    double sb = median_ns(op_decode_bytewise, &sample, iterations, batches);
     double ge = median_ns(op_encode, &gates, iterations, batches);
     double gd = median_ns(op_decode, &gates, iterations, batches);
+    double gb = median_ns(op_decode_bytewise, &gates, iterations, batches);
     double te = median_ns(op_encode, &telemetry, iterations, batches);
     double td = median_ns(op_decode, &telemetry, iterations, batches);
     double sc = median_ns(op_can_roundtrip, &sample, iterations, batches);
     double tc = median_ns(op_can_roundtrip, &telemetry, iterations, batches);
     printf("{\"iterations\": %ld, \"batches\": %d, "
-           "\"sample_encode_ns\": %.1f, \"sample_decode_ns\": %.1f, "
-           "\"gates_encode_ns\": %.1f, \"gates_decode_ns\": %.1f, "
+           "\"sample_encode_ns\": %.1f, \"sample_decode_ns\": %.1f, \"sample_decode_bytewise_ns\": %.1f, "
+           "\"gates_encode_ns\": %.1f, \"gates_decode_ns\": %.1f, \"gates_decode_bytewise_ns\": %.1f, "
            "\"telemetry_encode_ns\": %.1f, \"telemetry_decode_ns\": %.1f, "
            "\"can_sample_pack_unpack_ns\": %.1f, \"can_telemetry_pack_unpack_ns\": %.1f}\n",
-           iterations, batches, se, sd, ge, gd, te, td, sc, tc);
+           iterations, batches, se, sd, sb, ge, gd, gb, te, td, sc, tc);
     return (int)(sink & 0u);
 }

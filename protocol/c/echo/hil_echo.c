@@ -108,9 +108,12 @@ int main(int argc, char **argv)
             continue;
         }
         size_t used = 0;
-        for (ssize_t i = 0; i < n; i++) {
+        size_t at = 0;
+        while (at < (size_t)n) {
             hil_msg m;
-            if (!hil_decoder_feed(&dec, in[i], &m)) {
+            int got;
+            at += hil_decoder_feed_buf(&dec, in + at, (size_t)n - at, &m, &got);
+            if (!got) {
                 continue;
             }
             m.seq = seq++;

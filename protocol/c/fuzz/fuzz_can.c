@@ -68,9 +68,8 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         hil_can_rx fresh;
         hil_can_rx_init(&fresh, base);
         hil_msg again;
-        int done = 0;
         for (int k = 0; k < count; k++) {
-            done = hil_can_rx_feed(&fresh, &frames[k], &again, NULL);
+            int done = hil_can_rx_feed(&fresh, &frames[k], &again, NULL);
             if (done != (k + 1 == count)) {
                 __builtin_trap();
             }

@@ -62,7 +62,8 @@ int hil_shim_can_from_payload(uint8_t type, uint8_t seq, uint8_t role, uint16_t 
     return n;
 }
 
-/* Feeds a byte stream to a fresh decoder; each decoded message is written re-encoded as a
+/* Feeds a byte stream to a fresh decoder (hil_decoder_feed_buf, so the Python parity tests
+ * cover that entry point; the C vector tests cover both); each decoded message is written re-encoded as a
  * serial frame with its received seq. counters: frames_ok, crc_errors, framing_errors,
  * seq_gaps, unknown_types, version_errors, length_errors, last_bad_version.
  * Returns the bytes written, or -1 when out is too small. */
@@ -71,9 +72,12 @@ long hil_shim_decode_stream(const uint8_t *data, size_t len, uint8_t *out, size_
     hil_decoder dec;
     hil_decoder_init(&dec);
     size_t used = 0;
-    for (size_t i = 0; i < len; i++) {
+    size_t at = 0;
+    while (at < len) {
         hil_msg m;
-        if (hil_decoder_feed(&dec, data[i], &m)) {
+        int got;
+        at += hil_decoder_feed_buf(&dec, data + at, len - at, &m, &got);
+        if (got) {
             int n = hil_frame_encode(&m, out + used, cap - used);
             if (n < 0) {
                 return -1;

@@ -159,6 +159,23 @@ static void test_serial_stream(void **state)
     }
     assert_int_equal(yielded, s->yield_count);
     check_counters(s, &dec, SERIAL_COUNTERS, sizeof SERIAL_COUNTERS / sizeof SERIAL_COUNTERS[0]);
+
+    /* the buffer-at-a-time entry point: same messages, same counters */
+    hil_decoder_init(&dec);
+    yielded = 0;
+    size_t at = 0;
+    while (at < s->len) {
+        hil_msg got;
+        int done;
+        at += hil_decoder_feed_buf(&dec, s->bytes + at, s->len - at, &got, &done);
+        if (done) {
+            assert_true(yielded < s->yield_count);
+            assert_msg_equal(&got, &g_vectors.messages[s->yields[yielded]].msg);
+            yielded++;
+        }
+    }
+    assert_int_equal(yielded, s->yield_count);
+    check_counters(s, &dec, SERIAL_COUNTERS, sizeof SERIAL_COUNTERS / sizeof SERIAL_COUNTERS[0]);
 }
 
 static void test_can_stream(void **state)

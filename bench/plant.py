@@ -1,0 +1,108 @@
+"""Plant step cost: microseconds per 50 us control period, sensors included.
+
+    python -m bench plant            # or: python -m bench plant --quick
+
+The headline figure (`us_per_step`) is one `sample()` plus one `step(gates=...)` with the
+paper's default profile at rated speed, random Table 2 vectors (a DTC board's traffic): the
+median over batches of the mean per batch, timed with perf_counter_ns. The other scenarios
+show what the non-default paths cost (PWM duty input, dead time, all switches off).
+"""
+from __future__ import annotations
+
+import random
+import statistics
+import time
+
+from plant_rt import Plant, load_profile
+
+RATED_RAD_S = 3000.0 * 2 * 3.141592653589793 / 60
+WORDS = (0x29, 0x25, 0x26, 0x16, 0x1A, 0x19, 0x2A, 0x15)
+
+
+def _median_us(fn, batches: int, per_batch: int) -> float:
+    fn(max(100, per_batch // 10))                       # warm up (caches, noise blocks)
+    results = []
+    for _ in range(batches):
+        t0 = time.perf_counter_ns()
+        fn(per_batch)
+        results.append((time.perf_counter_ns() - t0) / per_batch / 1000.0)
+    return statistics.median(results)
+
+
+def _plant(**overrides) -> Plant:
+    overrides.setdefault("initial", {"speed_rad_s": RATED_RAD_S})
+    return Plant(load_profile(overrides=overrides), seed=0)
+
+
+def run(quick: bool = False) -> dict:
+    batches, per_batch = (5, 2000) if quick else (15, 10000)
+    rng = random.Random(0)
+    words = [rng.choice(WORDS) for _ in range(per_batch)]
+    duties = [(rng.random(), rng.random(), rng.random()) for _ in range(per_batch)]
+
+    plant = _plant()
+
+    def gates_with_sensors(n):
+        sample, step = plant.sample, plant.step
+        for g in words[:n]:
+            sample()
+            step(g)
+
+    def gates_only(n):
+        step = plant.step
+        for g in words[:n]:
+            step(g)
+
+    def sensors_only(n):
+        for _ in range(n):
+            plant._sample_k = -1          # force a fresh conversion each call
+            plant.sample()
+
+    def truth_only(n):
+        truth = plant.truth
+        for _ in range(n):
+            truth()
+
+    duty_plant = _plant()
+
+    def duty(n):
+        sample, step = duty_plant.sample, duty_plant.step
+        for d in duties[:n]:
+            sample()
+            step(duty=d)
+
+    dead_plant = _plant(inverter={"dead_time_s": 1.0e-6})
+
+    def duty_dead_time(n):
+        sample, step = dead_plant.sample, dead_plant.step
+        for d in duties[:n]:
+            sample()
+            step(duty=d)
+
+    off_plant = _plant()
+    off_plant.safe_state()
+
+    def all_off(n):
+        sample, step = off_plant.sample, off_plant.step
+        for _ in range(n):
+            sample()
+            step()
+
+    slow_batches = max(3, batches // 3)
+    slow_n = max(200, per_batch // 10)
+    us = _median_us(gates_with_sensors, batches, per_batch)
+    figures = {
+        "us_per_step": round(us, 3),
+        "steps_per_second": round(1e6 / us),
+        "period_s": plant.control_period_s,
+        "realtime_fraction": round(us * 1e-6 / plant.control_period_s, 4),
+        "us_step_only": round(_median_us(gates_only, batches, per_batch), 3),
+        "us_sample_only": round(_median_us(sensors_only, batches, per_batch), 3),
+        "us_truth": round(_median_us(truth_only, batches, per_batch), 3),
+        "us_per_step_duty": round(_median_us(duty, slow_batches, slow_n), 3),
+        "us_per_step_duty_dead_time_1us": round(_median_us(duty_dead_time, slow_batches, slow_n), 3),
+        "us_per_step_all_switches_off": round(_median_us(all_off, slow_batches, slow_n), 3),
+        "batches": batches,
+        "steps_per_batch": per_batch,
+    }
+    return figures

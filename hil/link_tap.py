@@ -1,0 +1,228 @@
+"""A tap between the session and any byte link: records raw frames, injects link faults.
+
+The tap frames the session's messages itself and hands whole frames to the
+link's ``send_bytes``; it reads the link's raw bytes with ``read_bytes``,
+splits them at the 0x00 delimiters and decodes them with its own stream
+decoder. In between, each frame may be dropped, corrupted (bits flipped),
+delayed by N periods, duplicated or swapped with the next one, or swallowed
+by an unplugged cable — in either direction, at a rate, from a seeded random
+generator per direction, so the same seed and the same traffic give the same
+faults. Counters say what was done to how many frames.
+
+Links that carry frames rather than bytes (CAN) are not tapped.
+"""
+from __future__ import annotations
+
+import random
+import time
+from collections import deque
+from dataclasses import dataclass
+
+from protocol.codec import FrameEncoder, StreamDecoder
+
+FAULT_KINDS = ("drop", "corrupt", "delay", "duplicate", "reorder", "unplug")
+DIRECTIONS = ("out", "in")  # out: bench -> board; in: board -> bench
+
+
+@dataclass
+class LinkFault:
+    kind: str                 # one of FAULT_KINDS
+    rate: float = 1.0         # probability per frame (drop, corrupt, duplicate, reorder)
+    bits: int = 1             # corrupt: bits flipped per damaged frame
+    periods: int = 1          # delay: how long frames are held
+    direction: str = "both"   # out | in | both
+    until_period: int | None = None  # lifted at this period (None: until cleared)
+
+    def applies_to(self, direction: str) -> bool:
+        return self.direction in ("both", direction)
+
+
+def tappable(link) -> bool:
+    return hasattr(link, "send_bytes") and hasattr(link, "read_bytes")
+
+
+class LinkTap:
+    """Same interface as a link (send, recv, close, counters), plus faults and capture."""
+
+    def __init__(self, link, seed: int = 0):
+        self.link = link
+        self.url = getattr(link, "url", "")
+        self._encoder = FrameEncoder()
+        self._decoder = StreamDecoder()
+        self._inbox: deque = deque()
+        self._partial = bytearray()
+        self._rng = {d: random.Random(f"{seed}:{d}") for d in DIRECTIONS}
+        self._held: list[tuple[int, str, bytes]] = []
+        self._reorder_slot: dict[str, bytes | None] = {d: None for d in DIRECTIONS}
+        self.faults: dict[str, LinkFault] = {}
+        self.period = 0
+        self.stats = {f"{d}_{what}": 0 for d in DIRECTIONS
+                      for what in ("frames", "dropped", "corrupted", "delayed", "duplicated",
+                                   "reordered", "unplugged")}
+        # Raw frames since the last take_capture(): the session batches them into the log.
+        self.captured = {d: bytearray() for d in DIRECTIONS}
+        self.captured_frames = {d: 0 for d in DIRECTIONS}
+
+    # ---------------------------------------------------------------- faults
+    def set_fault(self, name: str, fault: LinkFault) -> None:
+        if fault.kind not in FAULT_KINDS:
+            raise ValueError(f"unknown link fault '{fault.kind}' (known: {', '.join(FAULT_KINDS)})")
+        self.faults[name] = fault
+
+    def clear_fault(self, name: str) -> None:
+        self.faults.pop(name, None)
+        if not self.faults:
+            for direction, frame in self._flush_reorder():
+                self._deliver(direction, frame)
+
+    def tick(self, period: int) -> None:
+        """Called once per period: lifts expired faults, releases delayed frames."""
+        self.period = period
+        if self.faults:
+            expired = [n for n, f in self.faults.items()
+                       if f.until_period is not None and period >= f.until_period]
+            for name in expired:
+                self.clear_fault(name)
+        if self._held:
+            due = [h for h in self._held if h[0] <= period]
+            if due:
+                self._held = [h for h in self._held if h[0] > period]
+                for _, direction, frame in due:
+                    self._deliver(direction, frame)
+
+    def _flush_reorder(self):
+        out = []
+        for direction in DIRECTIONS:
+            frame = self._reorder_slot[direction]
+            if frame is not None:
+                out.append((direction, frame))
+                self._reorder_slot[direction] = None
+        return out
+
+    def _apply(self, direction: str, frame: bytes) -> list[bytes]:
+        stats = self.stats
+        stats[f"{direction}_frames"] += 1
+        rng = self._rng[direction]
+        frames = [frame]
+        for fault in self.faults.values():
+            if not fault.applies_to(direction):
+                continue
+            kind = fault.kind
+            if kind == "unplug":
+                stats[f"{direction}_unplugged"] += len(frames)
+                return []
+            if kind == "drop":
+                kept = [f for f in frames if rng.random() >= fault.rate]
+                stats[f"{direction}_dropped"] += len(frames) - len(kept)
+                frames = kept
+            elif kind == "corrupt":
+                damaged = []
+                for f in frames:
+                    if rng.random() < fault.rate:
+                        f = bytearray(f)
+                        for _ in range(fault.bits):
+                            bit = rng.randrange(len(f) * 8)
+                            f[bit >> 3] ^= 1 << (bit & 7)
+                        f = bytes(f)
+                        stats[f"{direction}_corrupted"] += 1
+                    damaged.append(f)
+                frames = damaged
+            elif kind == "duplicate":
+                doubled = []
+                for f in frames:
+                    doubled.append(f)
+                    if rng.random() < fault.rate:
+                        doubled.append(f)
+                        stats[f"{direction}_duplicated"] += 1
+                frames = doubled
+            elif kind == "delay":
+                for f in frames:
+                    self._held.append((self.period + fault.periods, direction, f))
+                stats[f"{direction}_delayed"] += len(frames)
+                return []
+            elif kind == "reorder":
+                swapped = []
+                for f in frames:
+                    held = self._reorder_slot[direction]
+                    if held is not None:
+                        swapped += [f, held]
+                        self._reorder_slot[direction] = None
+                    elif rng.random() < fault.rate:
+                        self._reorder_slot[direction] = f
+                        stats[f"{direction}_reordered"] += 1
+                    else:
+                        swapped.append(f)
+                frames = swapped
+        return frames
+
+    # ------------------------------------------------------------ data paths
+    def _deliver(self, direction: str, frame: bytes) -> None:
+        self.captured[direction] += frame
+        self.captured_frames[direction] += 1
+        if direction == "out":
+            self.link.send_bytes(frame)
+        else:
+            self._inbox.extend(self._decoder.feed(frame))
+
+    def _pass(self, direction: str, frame: bytes) -> None:
+        if self.faults:
+            for f in self._apply(direction, frame):
+                self._deliver(direction, f)
+        else:
+            self._deliver(direction, frame)
+
+    def send(self, msg) -> None:
+        self._pass("out", self._encoder.encode(msg))
+
+    def send_bytes(self, data: bytes) -> None:
+        self._pass("out", data)
+
+    def _take_in(self, data: bytes) -> None:
+        buf = self._partial
+        buf += data
+        end = buf.rfind(0)
+        if end < 0:
+            return
+        complete = bytes(buf[: end + 1])
+        del buf[: end + 1]
+        if not self.faults:
+            self._deliver("in", complete)
+            return
+        start = 0
+        while start < len(complete):
+            stop = complete.index(0, start) + 1
+            self._pass("in", complete[start:stop])
+            start = stop
+
+    def recv(self, timeout_s: float | None = 0.0):
+        inbox = self._inbox
+        if inbox:
+            return inbox.popleft()
+        deadline = None if timeout_s is None else time.monotonic() + timeout_s
+        while True:
+            remaining = None if deadline is None else max(0.0, deadline - time.monotonic())
+            data = self.link.read_bytes(remaining)
+            if data:
+                self._take_in(data)
+                if inbox:
+                    return inbox.popleft()
+            if deadline is not None and time.monotonic() >= deadline:
+                return None
+
+    def take_capture(self) -> dict[str, tuple[bytes, int]]:
+        out = {}
+        for d in DIRECTIONS:
+            out[d] = (bytes(self.captured[d]), self.captured_frames[d])
+            self.captured[d].clear()
+            self.captured_frames[d] = 0
+        return out
+
+    @property
+    def counters(self) -> dict[str, int]:
+        counters = dict(self.link.counters)
+        counters.update(self._decoder.counters)  # the tap decodes what the bench receives
+        counters.update({k: v for k, v in self.stats.items() if v})
+        return counters
+
+    def close(self) -> None:
+        self.link.close()
