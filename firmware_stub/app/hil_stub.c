@@ -213,6 +213,7 @@ static void on_param(hil_stub *s, const hil_msg *in)
 static void dispatch(hil_stub *s, const hil_msg *in)
 {
     hil_msg m;
+    const size_t name_len = sizeof stub_name - 1u < HIL_NAME_MAX ? sizeof stub_name - 1u : HIL_NAME_MAX;
     switch (in->type) {
     case HIL_MSG_SAMPLE:
         on_sample(s, &in->u.sample);
@@ -223,8 +224,8 @@ static void dispatch(hil_stub *s, const hil_msg *in)
         m.u.hello.role = HIL_ROLE_CONTROLLER;
         m.u.hello.capabilities = HIL_CAP_GATES | HIL_CAP_TELEMETRY | HIL_CAP_CAN;
         m.u.hello.control_period_ns = (uint32_t)(s->core.params.control_period_s * 1e9f + 0.5f);
-        m.u.hello.name_len = (uint8_t)(sizeof stub_name - 1u);
-        memcpy(m.u.hello.name, stub_name, sizeof stub_name - 1u);
+        m.u.hello.name_len = (uint8_t)name_len;
+        memcpy(m.u.hello.name, stub_name, name_len);
         emit(s, &m);
         break;
     case HIL_MSG_COMMAND:

@@ -1,0 +1,105 @@
+"""The `hil` command line: exit codes, reports, errors that name what was wrong."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import pytest
+
+from hil.cli import main as hil_main
+
+REPO = Path(__file__).resolve().parent.parent
+SPEED_STEP = REPO / "test_plans" / "01_speed_step_sensored.yaml"
+
+SHORT_PLAN = """
+name: short-spin
+description: spin up briefly and check the speed rose
+steps:
+  - command: {enable: true, speed_source: encoder, speed_ref_rpm: 1000}
+  - run: {duration_s: 0.05}
+  - check:
+      name: speed rose
+      kind: final_value
+      signal: plant.speed_rpm
+      limits: {low: %(low)s, unit: rpm}
+"""
+
+
+def _plan(tmp_path: Path, low: float, name: str = "plan.yaml") -> Path:
+    path = tmp_path / name
+    path.write_text(SHORT_PLAN % {"low": low})
+    return path
+
+
+def test_run_passing_plan_writes_reports_and_exits_0(tmp_path, capsys):
+    out = tmp_path / "out"
+    assert hil_main(["run", str(_plan(tmp_path, 100)), "--out", str(out), "--no-progress"]) == 0
+    assert "PASS" in capsys.readouterr().out
+    plan_dir = out / "short-spin"
+    record = json.loads((plan_dir / "result.json").read_text())
+    assert record["outcome"] == "PASS" and record["checks"][0]["measured"] > 100
+    ET.parse(out / "junit.xml")
+    assert (plan_dir / "log.mcap").stat().st_size > 0
+    assert "<img" in (plan_dir / "report.html").read_text()
+
+
+def test_impossible_limit_fails_with_exit_1_and_the_measured_value(tmp_path, capsys):
+    out = tmp_path / "out"
+    assert hil_main(["run", str(_plan(tmp_path, 100000)), "--out", str(out), "--no-progress"]) == 1
+    record = json.loads((out / "short-spin" / "result.json").read_text())
+    check = record["checks"][0]
+    assert check["outcome"] == "FAIL" and 100 < check["measured"] < 100000
+
+
+def test_unknown_link_is_an_error_naming_it(tmp_path, capsys):
+    code = hil_main(["run", str(_plan(tmp_path, 1)), "--link", "bogus-link", "--out",
+                     str(tmp_path / "out"), "--no-progress"])
+    assert code == 2
+    record = json.loads((tmp_path / "out" / "short-spin" / "result.json").read_text())
+    assert record["outcome"] == "ERROR" and "bogus-link" in record["reason"]
+
+
+def test_unwritable_out_directory_is_refused_before_running(tmp_path, capsys):
+    blocker = tmp_path / "file"
+    blocker.write_text("not a directory")
+    code = hil_main(["run", str(_plan(tmp_path, 1)), "--out", str(blocker / "out"), "--no-progress"])
+    assert code == 2
+    assert str(blocker / "out") in capsys.readouterr().err
+
+
+def test_invalid_plan_is_refused_with_file_line_and_key(tmp_path, capsys):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("name: bad\nsteps:\n  - run: {duration_s: -1}\n")
+    assert hil_main(["run", str(bad), "--out", str(tmp_path / "out"), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert f"{bad}:3" in err and "duration_s" in err
+    assert not (tmp_path / "out" / "bad").exists()
+
+
+def test_plans_lists_and_validates(tmp_path, capsys):
+    assert hil_main(["plans", str(REPO / "test_plans")]) == 0
+    assert "speed-step-sensored" in capsys.readouterr().out
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("name: bad\nsteps:\n  - run: {duration_s: 1, typo: 2}\n")
+    assert hil_main(["plans", str(bad)]) == 2
+    assert "typo" in capsys.readouterr().out
+
+
+def test_serve_runs_the_plant_against_the_stub_for_a_duration(tmp_path):
+    log = tmp_path / "serve.mcap"
+    proc = subprocess.run([sys.executable, "-m", "hil.cli", "serve", "--link", "stub", "--duration",
+                           "0.02", "--modbus", "off", "--log", str(log)],
+                          capture_output=True, text=True, timeout=120, cwd=REPO)
+    assert proc.returncode == 0, proc.stderr
+    assert "400 periods" in proc.stderr
+    assert log.stat().st_size > 0
+
+
+def test_help_for_every_command():
+    for command in ([], ["run"], ["serve"], ["log"], ["bench"], ["plans"]):
+        proc = subprocess.run([sys.executable, "-m", "hil.cli", *command, "--help"],
+                              capture_output=True, text=True, timeout=60, cwd=REPO)
+        assert proc.returncode == 0 and "usage: hil" in proc.stdout
