@@ -62,7 +62,13 @@ def _is_plan_file(file_path: Path, config: pytest.Config) -> bool:
     if file_path.suffix not in (".yaml", ".yml"):
         return False
     dirs = set(config.getini("hil_plan_dirs"))
-    if not dirs.intersection(file_path.parent.parts):
+    # Directory names below the rootdir only: a checkout that happens to live
+    # under a folder named test_plans must not turn all its YAML into plans.
+    try:
+        parts = file_path.parent.relative_to(config.rootpath).parts
+    except ValueError:
+        parts = file_path.parent.parts
+    if not dirs.intersection(parts):
         return False
     from hil.plan import looks_like_plan
 

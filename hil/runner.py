@@ -26,8 +26,8 @@ from plant_rt import TRUTH_FIELDS, load_profile
 from hil.checks import evaluate_check
 from hil.outcome import CheckResult, Outcome, PlanResult, StepResult, plan_outcome, skipped_remainder
 from hil.plan import (
-    CheckStep, CommandStep, DcLinkStep, FaultStep, LoadStep, MarkStep, ParamSetStep, Plan,
-    PlantParamStep, RunStep, WaitUntilStep, load_plan, plan_files,
+    PROFILE_NAMES, CheckStep, CommandStep, DcLinkStep, FaultStep, LoadStep, MarkStep, ParamSetStep,
+    Plan, PlantParamStep, RunStep, WaitUntilStep, load_plan, plan_files,
 )
 from hil.recorder import SENSOR_FIELDS, TELEMETRY_FIELDS, COMMAND_FIELDS
 from hil.report import slug, write_reports, write_summary
@@ -35,7 +35,6 @@ from hil.session import BenchSession, SessionConfig, SessionError
 from hil.signals import SignalSet
 from hil.yaml_source import ConfigError
 
-NAMED_PROFILES = {"paper", "default"}
 PROGRESS_CHUNK_S = 0.01  # simulated seconds between progress updates and wall-clock checks
 
 
@@ -54,9 +53,9 @@ def expand_plan_paths(paths: Iterable[str | Path]) -> list[Path]:
 def profile_for(plan: Plan):
     if plan.profile_path is not None:
         return load_profile(plan.profile_path, overrides=dict(plan.overrides) or None)
-    if plan.profile not in (None, *NAMED_PROFILES):
+    if plan.profile not in (None, *PROFILE_NAMES):
         raise ConfigError(f"unknown profile '{plan.profile}' (named profiles: "
-                          f"{', '.join(sorted(NAMED_PROFILES))}, or a path to a YAML file)",
+                          f"{', '.join(PROFILE_NAMES)}, or a path to a YAML file)",
                           str(plan.source_path))
     return load_profile(None, overrides=dict(plan.overrides) or None)
 
@@ -90,11 +89,21 @@ def live_unit(name: str) -> str:
 
 # --------------------------------------------------------------------------- stimuli
 class Stimuli:
-    """Per-period stimuli (DC-link ramps) applied between periods."""
+    """Per-period stimuli applied between periods: DC-link ramps, and a repeated load table
+    (which the plant's load model does not have), evaluated once per period and held."""
 
     def __init__(self, session: BenchSession):
         self.session = session
         self.ramps: list[tuple[float, float, float, float]] = []  # t0, t1, v0, v1
+        self.load_step: LoadStep | None = None
+        self.load_t0 = 0.0
+        self.load_before_nm = 0.0
+
+    def per_period_load(self, step: LoadStep) -> None:
+        plant = self.session.plant
+        self.load_step, self.load_t0 = step, plant.t_s
+        self.load_before_nm = plant.truth()[_LOAD_INDEX]
+        self(plant.period)
 
     def dc_link(self, step: DcLinkStep) -> None:
         plant = self.session.plant
@@ -107,6 +116,10 @@ class Stimuli:
         self.ramps = [(now, now + step.ramp_s, v0, step.voltage_v)]
 
     def __call__(self, _period: int) -> None:
+        if self.load_step is not None:
+            plant = self.session.plant
+            plant.load.set_constant(self.load_step.torque_at(plant.t_s - self.load_t0, 0.0,
+                                                             self.load_before_nm))
         if not self.ramps:
             return
         t = self.session.plant.t_s
@@ -117,10 +130,18 @@ class Stimuli:
             self.ramps.clear()
 
 
-def apply_load(session: BenchSession, step: LoadStep) -> None:
+_LOAD_INDEX = TRUTH_FIELDS.index("load_torque_nm")
+
+
+def apply_load(session: BenchSession, stimuli: Stimuli, step: LoadStep) -> None:
     load = session.plant.load
     now = session.plant.t_s
-    if step.type == "constant":
+    stimuli.load_step = None
+    # The plant's load is profile(t) + kw * speed: a step replaces both terms.
+    load.set_speed_proportional(0.0)
+    if step.type == "table" and step.repeat:
+        stimuli.per_period_load(step)
+    elif step.type == "constant":
         load.set_constant(step.torque_nm)
     elif step.type == "step":
         load.set_step(now + step.delay_s, step.torque_nm)
@@ -129,10 +150,8 @@ def apply_load(session: BenchSession, step: LoadStep) -> None:
     elif step.type == "table":
         load.set_table([(now + t, nm) for t, nm in step.points])
     elif step.type == "speed_proportional":
+        load.set_constant(step.offset_nm)
         load.set_speed_proportional(step.nm_per_rad_s)
-        if step.offset_nm:
-            raise ConfigError("speed_proportional load with offset_nm is not supported by the plant",
-                              None)
 
 
 # --------------------------------------------------------------------------- running
@@ -285,7 +304,7 @@ def _execute(plan: Plan, session: BenchSession, stimuli: Stimuli, state: _RunSta
             for name, value in step.params:
                 session.param_set(name, value)
         elif isinstance(step, LoadStep):
-            apply_load(session, step)
+            apply_load(session, stimuli, step)
             session.event("load", type=step.type, torque_nm=step.torque_nm)
         elif isinstance(step, DcLinkStep):
             stimuli.dc_link(step)

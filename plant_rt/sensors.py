@@ -32,6 +32,7 @@ PHASE_PAIRS = {"ab": (0, 1), "ac": (0, 2), "bc": (1, 2)}
 _S32 = 0.5 * math.sqrt(3.0)
 _INV_2PI = 1.0 / (2.0 * math.pi)
 _new_sample = tuple.__new__
+_floor = math.floor
 
 
 class SensorSample(NamedTuple):
@@ -196,6 +197,9 @@ class Encoder:
 class Sensors:
     """The board's view: i1, i2 (two phase currents), vdc and the encoder."""
 
+    __slots__ = ("params", "i1", "i2", "vdc", "encoder", "overcurrent_trip_a",
+                 "overvoltage_trip_v", "_pair")
+
     def __init__(self, params: SensorParams, seed: int):
         cur, vol = params.current, params.dc_voltage
         self.params = params
@@ -227,8 +231,7 @@ class Sensors:
         i_b = -0.5 * ia + _S32 * ib
         i_c = -0.5 * ia - _S32 * ib
         trip = self.overcurrent_trip_a
-        if (i_a > trip or i_a < -trip or i_b > trip or i_b < -trip or i_c > trip
-                or i_c < -trip):
+        if not (-trip <= i_a <= trip and -trip <= i_b <= trip and -trip <= i_c <= trip):
             status |= STATUS_OVERCURRENT
         if v_dc > self.overvoltage_trip_v:
             status |= STATUS_OVERVOLTAGE
@@ -241,7 +244,8 @@ class Sensors:
             count = enc.stuck_counts
         else:
             cpr = enc.counts_per_rev
-            position = revs * cpr + math.floor(theta_m * cpr * _INV_2PI)
-            count = ((-position if enc.invert else position) + enc.offset_counts) \
-                & ((1 << enc.counter_bits) - 1)
+            position = revs * cpr + _floor(theta_m * cpr * _INV_2PI)
+            if enc.invert:
+                position = -position
+            count = (position + enc.offset_counts) & ((1 << enc.counter_bits) - 1)
         return _new_sample(SensorSample, (period, c1, c2, c3, count, status))

@@ -51,11 +51,17 @@ def can_pack(msg, sender_role: int, base_id: int = DEFAULT_BASE_ID, seq: int = 0
         raise ProtocolError(f"not a protocol message: {msg!r}")
     can_id = base_id + ROLE_STRIDE * int(sender_role) + int(msg_type)
     if msg_type == MsgType.SAMPLE or msg_type == MsgType.DUTY:
-        encode_payload(msg)  # validates every field at its full serial width
-        if msg_type == MsgType.SAMPLE:
-            low, high = pack_adc40(msg.adc_i1, msg.adc_i2, msg.adc_vdc, msg.status)
-            return [(can_id, _SAMPLE_CAN.pack(msg.period & 0xFF, low, high, msg.encoder))]
-        return [(can_id, _DUTY_CAN.pack(msg.period & 0xFFFF, *msg.duty))]
+        period = msg.period
+        try:
+            if not 0 <= period <= 0xFFFFFFFF:
+                raise ValueError("period")
+            if msg_type == MsgType.SAMPLE:
+                low, high = pack_adc40(msg.adc_i1, msg.adc_i2, msg.adc_vdc, msg.status)
+                return [(can_id, _SAMPLE_CAN.pack(period & 0xFF, low, high, msg.encoder))]
+            return [(can_id, _DUTY_CAN.pack(period & 0xFFFF, *msg.duty))]
+        except (struct.error, TypeError, ValueError):
+            encode_payload(msg)  # raises the ProtocolError naming the field
+            raise
     payload = encode_payload(msg)
     if msg_type not in SEGMENTED_TYPES:
         return [(can_id, payload)]

@@ -10,6 +10,7 @@ a link raise LinkError naming the port, interface or channel and the reason.
 """
 from __future__ import annotations
 
+import abc
 import errno
 import os
 import select
@@ -30,23 +31,27 @@ class LinkError(ConnectionError):
     """A link that cannot be opened or used; the message names the port or bus and the reason."""
 
 
-class Link:
+class Link(abc.ABC):
     """Send a message, receive one with a timeout, close, counters. Usable as a context manager."""
 
     url: str = ""
 
+    @abc.abstractmethod
     def send(self, msg) -> None:
-        raise NotImplementedError
+        """Encodes and sends one message; raises LinkError if the link is closed or broken."""
 
+    @abc.abstractmethod
     def recv(self, timeout_s: float | None = 0.0):
-        raise NotImplementedError
+        """The next message, or None after timeout_s (0: poll, None: no limit)."""
 
+    @abc.abstractmethod
     def close(self) -> None:
-        raise NotImplementedError
+        """Releases the port or bus; idempotent."""
 
     @property
+    @abc.abstractmethod
     def counters(self) -> dict[str, int]:
-        raise NotImplementedError
+        """Decoder/reassembler counters plus the link's own traffic counts."""
 
     def __enter__(self):
         return self
@@ -139,17 +144,20 @@ class SerialLink(Link):
         if inbox:
             return inbox.popleft()
         self._check_open()
-        deadline = _deadline(timeout_s)
+        deadline = None if timeout_s is None else time.monotonic() + timeout_s
+        remaining = timeout_s
         while True:
-            data = self._read(_remaining(deadline))
+            data = self._read(remaining)
             if data:
                 self.rx_bytes += len(data)
                 msgs = self._decoder.feed(data)
                 if msgs:
                     inbox.extend(msgs)
                     return inbox.popleft()
-            elif deadline is not None and time.monotonic() >= deadline:
-                return None
+            if deadline is not None:
+                remaining = deadline - time.monotonic()
+                if remaining <= 0:
+                    return None
 
     def read_bytes(self, timeout_s: float | None = 0.0) -> bytes:
         """Raw bytes as they arrive, bypassing the decoder (benchmarks, fault-injection tests)."""

@@ -390,3 +390,33 @@ def test_bench_fixture_opens_and_closes_a_bench(pytester, monkeypatch):
     assert type(kwargs["profile"]).__name__ == "BenchProfile"
     assert kwargs["log_path"].name == "bench.mcap" and kwargs["log_path"].parent.is_dir()
     assert "profile" not in named
+
+
+def test_plugin_marginal_passes_with_a_warning(pytester, fake_runner):
+    plans = pytester.mkdir("test_plans")
+    text = PAPER_STEP_PLAN.read_text().replace("limits: {high: 5, marginal: 1, unit: \"%\"}",
+                                               "limits: {high: 3.5, marginal: 1, unit: \"%\"}")
+    (plans / "step.yaml").write_text(text)
+    result = pytester.runpytest("test_plans", "-k", "overshoot", *PLUGIN_ARGS)
+    result.assert_outcomes(passed=1, deselected=len(load_plan(PAPER_STEP_PLAN).checks), warnings=1)
+    result.stdout.fnmatch_lines(["*HilMarginalWarning: overshoot: measured 3.* %, within (marginal)*"])
+
+
+def test_plugin_reports_a_runner_failure_on_every_item(pytester, monkeypatch):
+    calls = []
+
+    def run_plan(plan, link=None, mode=None, out_dir=None):
+        calls.append(plan.name)
+        raise RuntimeError("board on 'stub' exited with status -11 while waiting for HELLO")
+
+    module = types.ModuleType("hil.runner")
+    module.run_plan = run_plan
+    monkeypatch.setitem(sys.modules, "hil.runner", module)
+    monkeypatch.setenv("PYTEST_DISABLE_PLUGIN_AUTOLOAD", "1")
+    plans = pytester.mkdir("test_plans")
+    (plans / "step.yaml").write_text(PAPER_STEP_PLAN.read_text())
+    result = pytester.runpytest("test_plans", *PLUGIN_ARGS)
+    n_items = len(load_plan(PAPER_STEP_PLAN).checks) + 1
+    result.assert_outcomes(failed=n_items)
+    assert result.stdout.str().count("the plan could not run: RuntimeError: board on 'stub' exited") >= n_items
+    assert calls == ["speed-step-sensored"]                  # run once, reported on every item

@@ -46,13 +46,15 @@ typedef struct {
     hil_can_rx can_rx;
     hil_stub_counters counters;
     uint32_t (*read_cycles)(void);
-    uint32_t samples;       /* SAMPLEs answered, for the telemetry divider */
     uint32_t last_period;   /* of the last SAMPLE */
+    uint32_t heartbeats;    /* HEARTBEATs sent */
+    uint32_t version_errors_seen; /* decoder version errors already answered with HELLO */
     uint16_t can_base;
     uint8_t transport;
     uint8_t seq;
     uint8_t shutdown;
     uint8_t reported_state; /* last state sent in STATUS */
+    uint8_t peer_version_bad; /* the bench's HELLO named another version: answer only HELLO */
     size_t out_len;
     uint8_t out[OUT_BYTES];
     size_t can_out_len;
@@ -162,7 +164,9 @@ static void on_sample(hil_stub *s, const hil_sample *sample)
     hil_msg m;
     s->last_period = sample->period;
     uint32_t c0 = s->read_cycles ? s->read_cycles() : 0u;
-    uint8_t gates = ctl_step(&s->core, sample, &m.u.telemetry);
+    uint32_t div = s->core.params.telemetry_divider;
+    int want_telemetry = div != 0u && sample->period % div == 0u;
+    uint8_t gates = ctl_step(&s->core, sample, want_telemetry ? &m.u.telemetry : NULL);
     if (s->read_cycles) {
         s->core.st.step_cycles = s->read_cycles() - c0;
     }
@@ -171,9 +175,7 @@ static void on_sample(hil_stub *s, const hil_sample *sample)
     g.u.gates.period = sample->period;
     g.u.gates.gates = gates;
     emit(s, &g);
-    s->samples++;
-    uint32_t div = s->core.params.telemetry_divider;
-    if (div != 0u && s->samples % div == 0u) {
+    if (want_telemetry) {
         m.type = HIL_MSG_TELEMETRY;
         emit(s, &m);
     }
@@ -210,23 +212,38 @@ static void on_param(hil_stub *s, const hil_msg *in)
     emit(s, &m);
 }
 
-static void dispatch(hil_stub *s, const hil_msg *in)
+static void emit_hello(hil_stub *s)
 {
     hil_msg m;
     const size_t name_len = sizeof stub_name - 1u < HIL_NAME_MAX ? sizeof stub_name - 1u : HIL_NAME_MAX;
+    m.type = HIL_MSG_HELLO;
+    m.u.hello.proto_version = HIL_PROTO_VERSION;
+    m.u.hello.role = HIL_ROLE_CONTROLLER;
+    m.u.hello.capabilities = HIL_CAP_GATES | HIL_CAP_TELEMETRY | HIL_CAP_CAN;
+    m.u.hello.control_period_ns = (uint32_t)(s->core.params.control_period_s * 1e9f + 0.5f);
+    m.u.hello.name_len = (uint8_t)name_len;
+    memcpy(m.u.hello.name, stub_name, name_len);
+    emit(s, &m);
+}
+
+static void dispatch(hil_stub *s, const hil_msg *in)
+{
+    hil_msg m;
+    if (in->type == HIL_MSG_HELLO) {
+        /* SPEC.md 2.1: answer every HELLO; after one naming another version,
+         * ignore everything but HELLO */
+        s->peer_version_bad = in->u.hello.proto_version != HIL_PROTO_VERSION;
+        emit_hello(s);
+        s->counters.frames_in++;
+        return;
+    }
+    if (s->peer_version_bad) {
+        s->counters.ignored++;
+        return;
+    }
     switch (in->type) {
     case HIL_MSG_SAMPLE:
         on_sample(s, &in->u.sample);
-        break;
-    case HIL_MSG_HELLO:
-        m.type = HIL_MSG_HELLO;
-        m.u.hello.proto_version = HIL_PROTO_VERSION;
-        m.u.hello.role = HIL_ROLE_CONTROLLER;
-        m.u.hello.capabilities = HIL_CAP_GATES | HIL_CAP_TELEMETRY | HIL_CAP_CAN;
-        m.u.hello.control_period_ns = (uint32_t)(s->core.params.control_period_s * 1e9f + 0.5f);
-        m.u.hello.name_len = (uint8_t)name_len;
-        memcpy(m.u.hello.name, stub_name, name_len);
-        emit(s, &m);
         break;
     case HIL_MSG_COMMAND:
         on_command(s, &in->u.command);
@@ -236,8 +253,10 @@ static void dispatch(hil_stub *s, const hil_msg *in)
         on_param(s, in);
         break;
     case HIL_MSG_HEARTBEAT:
+        /* the bench only sends one after 100 ms of silence, so answering keeps
+         * to SPEC.md 2.6; the counter is our own */
         m.type = HIL_MSG_HEARTBEAT;
-        m.u.heartbeat.counter = in->u.heartbeat.counter;
+        m.u.heartbeat.counter = s->heartbeats++;
         emit(s, &m);
         break;
     case HIL_MSG_SHUTDOWN: {
@@ -262,6 +281,11 @@ size_t hil_stub_exchange(void *inst, const uint8_t *rx, size_t rx_len, uint8_t *
     for (size_t i = 0; i < rx_len; ++i) {
         if (hil_decoder_feed(&s->dec, rx[i], &in)) {
             dispatch(s, &in);
+        }
+        if (s->dec.version_errors != s->version_errors_seen) {
+            /* a frame of another version: say which one we speak (SPEC.md 2.1) */
+            s->version_errors_seen = s->dec.version_errors;
+            emit_hello(s);
         }
     }
     size_t n = s->out_len < tx_cap ? s->out_len : tx_cap;

@@ -37,7 +37,7 @@ uint8_t prot_encoder_loss(const prot_cfg *cfg, prot_state *st, uint16_t count, f
         return PROT_FAULT_NONE;
     }
     if (++st->frozen_periods > cfg->encoder_loss_timeout_periods) {
-        *value = flux_speed_rad_s;
+        *value = (float)st->frozen_periods * cfg->control_period_s;
         return PROT_FAULT_ENCODER_LOSS;
     }
     return PROT_FAULT_NONE;

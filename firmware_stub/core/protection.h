@@ -43,8 +43,8 @@ void prot_reset(prot_state *st, uint16_t count);
 /* Returns a PROT_FAULT_* code (0 = none) and the tripping value in *value:
  * the peak phase current (A) or the DC-link voltage (V). */
 uint8_t prot_hardware(const prot_cfg *cfg, float i_peak_a, float vdc_v, uint8_t status_bits, float *value);
-/* Returns PROT_FAULT_ENCODER_LOSS or 0; *value is the flux speed that
- * contradicted the still encoder (mechanical rad/s). */
+/* Returns PROT_FAULT_ENCODER_LOSS or 0; *value is the time without an encoder
+ * edge, s (SPEC.md 9.6). */
 uint8_t prot_encoder_loss(const prot_cfg *cfg, prot_state *st, uint16_t count, float flux_speed_rad_s,
                           int encoder_selected, float *value);
 

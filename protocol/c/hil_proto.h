@@ -233,7 +233,7 @@ typedef enum {
     HIL_ERR_LENGTH = -1,       /* payload length wrong for the type */
     HIL_ERR_UNKNOWN_TYPE = -2, /* type code not in this version */
     HIL_ERR_VERSION = -3,      /* frame from another protocol version */
-    HIL_ERR_RANGE = -4,        /* field out of range (e.g. name too long, 12-bit overflow on CAN) */
+    HIL_ERR_RANGE = -4,        /* field out of range (name_len > 40, SAMPLE count > 4095, bad CAN role/base) */
     HIL_ERR_BUFFER = -5        /* caller's buffer too small */
 } hil_result;
 
@@ -324,7 +324,9 @@ typedef struct {
 } hil_can_rx;
 
 void hil_can_rx_init(hil_can_rx *rx, uint16_t base_id);
-/* Returns 1 and fills *out (and *sender_role if not NULL) when a frame completes a message, else 0.
+/* Standard data frames only: the caller drops extended, remote and error frames (and, if it
+ * wishes, frames of its own role) before feeding.
+ * Returns 1 and fills *out (and *sender_role if not NULL) when a frame completes a message, else 0.
  * out->seq is the segmentation counter of a multi-frame message, 0 for a single frame. */
 int hil_can_rx_feed(hil_can_rx *rx, const hil_can_frame *frame, hil_msg *out, uint8_t *sender_role);
 
