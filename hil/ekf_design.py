@@ -104,9 +104,9 @@ def main() -> int:
     print(f"/* hil/ekf_design.py: sigma_v = {model.angle_std_rad():.6g} rad, "
           f"sigma_w = {model.speed_increment_std_rad_s():.6g} rad/s per period; "
           f"estimator poles {', '.join(f'{w:.1f}' for w in g.poles_rad_s)} rad/s */")
-    print(f"#define CTL_DEFAULT_EKF_K1 {g.k1:.9g}f")
-    print(f"#define CTL_DEFAULT_EKF_K2_RAD_S {g.k2_rad_s:.9g}f")
-    print(f"#define CTL_DEFAULT_EKF_K3_RAD_S {g.k3_rad_s:.9g}f")
+    # 9 significant digits of the float32 value: the C literal parses back to exactly it
+    for name, value in (("K1", g.k1), ("K2_RAD_S", g.k2_rad_s), ("K3_RAD_S", g.k3_rad_s)):
+        print(f"#define CTL_DEFAULT_EKF_{name} {float(np.float32(value)):.9g}f")
     return 0
 
 

@@ -102,8 +102,9 @@ class Network:
             else:
                 kinds.append(O)
         self._configure(kinds)
-        self._project(y)
-        self._settle(t, y)
+        if self.zero:                   # only a floating phase can start to conduct
+            self._project(y)
+            self._settle(t, y)
 
     def invalidate(self) -> None:
         """Something outside changed (a parameter, the source voltage): re-check at the next interval."""

@@ -21,6 +21,7 @@ switch word, integrated one after the other (segment by segment, never averaged)
 from __future__ import annotations
 
 import math
+import operator
 from dataclasses import dataclass
 
 from plant_rt.spec import param
@@ -108,9 +109,13 @@ class Command:
         if gates is not None and duty is not None:
             raise ValueError("step() takes gates or duty, not both")
         if gates is not None:
-            if isinstance(gates, bool) or not isinstance(gates, int) or not 0 <= gates <= 0x3F:
+            try:
+                word = operator.index(gates)        # numpy integers too, not floats
+            except TypeError:
+                word = -1
+            if isinstance(gates, bool) or not 0 <= word <= 0x3F:
                 raise ValueError(f"gates must be an int 0..0x3F of HIL_GATE_* bits, got {gates!r}")
-            return Command(gates=gates)
+            return GATE_COMMANDS[word]
         if duty is not None:
             try:
                 values = tuple(float(d) for d in duty)
@@ -132,6 +137,10 @@ class Command:
         if d >= 1.0:
             return not low, ()
         return bool(low), (0.5 * period_s * (1.0 - d), 0.5 * period_s * (1.0 + d))
+
+
+#: One shared Command per gate word, so an unchanged command is recognised by identity.
+GATE_COMMANDS = tuple(Command(gates=g) for g in range(64))
 
 
 class SwitchTimeline:

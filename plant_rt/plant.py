@@ -21,8 +21,8 @@ from math import cos, pi, sin
 from plant_rt.circuit import S32, Network
 from plant_rt.dc_link import DcLink
 from plant_rt.inverter import (
-    LEG_BITS, H, N, P, Command, InverterParams, SwitchTimeline, driven_vector, leg_states,
-    shoot_through,
+    GATE_COMMANDS, LEG_BITS, H, N, P, Command, InverterParams, SwitchTimeline, driven_vector,
+    leg_states, shoot_through,
 )
 from plant_rt.load import Load
 from plant_rt.motor import MotorModel
@@ -38,9 +38,7 @@ RPM_PER_RAD_S = 60.0 / TWO_PI
 TRUTH_FIELDS = ("t_s", "i_a", "i_b", "i_c", "i_alpha", "i_beta", "psi_alpha", "psi_beta",
                 "flux_mag_wb", "torque_nm", "speed_rad_s", "speed_rpm", "theta_e_rad",
                 "theta_m_rad", "v_dc", "i_dc", "load_torque_nm", "u_alpha", "u_beta")
-
-
-_GATE_COMMANDS = tuple(Command(gates=g) for g in range(64))
+_NO_VECTOR = (0.0, 0.0, 0.0, 0.0, None)
 _SHOOT_THROUGH = tuple(shoot_through(g) for g in range(64))
 
 
@@ -74,7 +72,7 @@ class Plant:
         self._pa, self._pb = self.motor.flux_from_currents(0.0, 0.0, th)
         self._vcap = self.dc_link.source_v
         self._vdc = self.dc_link.source_v
-        self._cmd = _GATE_COMMANDS[0]
+        self._cmd = GATE_COMMANDS[0]
         self._timeline.reset(self._cmd)
         self._flags = 0
         self._u_int = (0.0, 0.0)
@@ -139,41 +137,38 @@ class Plant:
         if duty is None and gates is None:
             new = old
         elif duty is None and type(gates) is int and 0 <= gates < 64:
-            new = _GATE_COMMANDS[gates]
+            new = GATE_COMMANDS[gates]
         else:
             new = Command.parse(gates, duty)
         T = self._T
         t0 = self.period * T
         th_start = self._th
         self._flags = 0
-        load = self.load
-        seg_t, v0, slope, t_next = self._load_seg
-        if load.version == self._load_key and seg_t <= t0 and t0 + T <= t_next:
-            v0 += slope * (t0 - seg_t)
-        else:
-            v0, slope, t_next = self._load_segment(t0)
-        vec = self._vectors[new.gates] if new.duty is None else None
-        if (vec is not None and self._fast_ok and t_next >= t0 + T and not load.locked
-                and (self._one_interval or (old is new and self._timeline.dead_time_s == 0.0))):
-            va, vb, ga, gb, legs = vec
-            pa0, pb0 = self._pa, self._pb
-            n = self._n_fast
-            pa, pb, self._w, self._th = self.motor.advance(
-                pa0, pb0, self._w, th_start, va, vb, T / n, n, v0, slope,
-                self.motor.b + load.kw)
-            self._pa, self._pb = pa, pb
-            r = self.motor.r
-            self._u_int = (va * T, vb * T)
-            # int i dt follows from eq. (1) exactly as RK4 integrated it: (u T - dpsi) / R.
-            self._idc_int = (ga * (va * T - (pa - pa0)) + gb * (vb * T - (pb - pb0))) / r
-            if self._net_dirty:
-                self.network.set_driven(legs)
-                self._net_dirty = False
-                self._zero_current = False
-        else:
-            self._general(t0, old, new)
-        self._cmd = new
-        th = self._th
+        # Fast path: the whole period one driven Table 2 vector under a time-invariant load.
+        if (self._fast_gates and new.duty is None and t0 + T <= self._load_const_until
+                and self.load.version == self._load_key and (old is new or self._one_interval)):
+            va, vb, ga, gb, legs = vec = self._vectors[new.gates] or _NO_VECTOR
+            if vec is not _NO_VECTOR:
+                pa0, pb0 = self._pa, self._pb
+                n = self._n_fast
+                pa, pb, self._w, th = self.motor.advance(
+                    pa0, pb0, self._w, th_start, va, vb, T / n, n, self._load_v0, 0.0,
+                    self._bw)
+                self._pa = pa
+                self._pb = pb
+                self._u_int = (va * T, vb * T)
+                # int i dt follows from eq. (1) exactly as RK4 integrated it: (u T - dpsi)/R.
+                self._idc_int = (ga * (va * T - pa + pa0) + gb * (vb * T - pb + pb0)) * self._ir
+                if self._net_dirty:
+                    self.network.set_driven(legs)
+                    self._net_dirty = False
+                    self._zero_current = False
+                self._finish(th_start, th)
+                return
+        self._general(t0, old, new)
+        self._finish(th_start, self._th)
+
+    def _finish(self, th_start: float, th: float) -> None:
         if (th_start >= 0.0) != (th >= 0.0):
             self._flags |= STATUS_INDEX_PULSE
         if th > pi:
@@ -265,7 +260,7 @@ class Plant:
     def safe_state(self) -> None:
         """All six switches off from now on: the motor coasts through the diodes until the next
         step() with gates or duty (the bench's hardware disable, no computation delay)."""
-        self._cmd = _GATE_COMMANDS[0]
+        self._cmd = GATE_COMMANDS[0]
         self._timeline.reset(self._cmd)
         self.network.invalidate()
 

@@ -130,7 +130,7 @@ _PAYLOAD_ENCODERS = {
 }
 
 # Wire width of each field, to name the offending field when packing fails.
-_FIELD_LIMITS = {"B": (0, 0xFF), "H": (0, 0xFFFF), "I": (0, 0xFFFFFFFF)}
+_FIELD_LIMITS = {"B": (0, 0xFF), "H": (0, 0xFFFF), "I": (0, 0xFFFFFFFF), "adc": (0, 0xFFF), "nibble": (0, 0xF)}
 
 
 def encode_payload(msg) -> bytes:
@@ -172,7 +172,8 @@ def _range_error(msg, exc: Exception) -> ProtocolError:
 _FIELD_FORMATS: dict[type, dict[str, str]] = {
     Hello: {"proto_version": "B", "role": "B", "capabilities": "H", "control_period_ns": "I",
             "name_len": "B"},
-    Sample: {"period": "I", "encoder": "H"},
+    Sample: {"period": "I", "adc_i1": "adc", "adc_i2": "adc", "adc_vdc": "adc", "encoder": "H",
+             "status": "nibble"},
     Gates: {"period": "I", "gates": "B"},
     Duty: {"period": "I", "duty": "H"},
     Command: {"flags": "B", "speed_source": "B", "speed_ref_rad_s": "f", "torque_ref_nm": "f",

@@ -106,7 +106,10 @@ class SerialLink(Link):
 
     # -- sending
     def send(self, msg) -> None:
-        self.send_bytes(self._encoder.encode(msg))
+        data = self._encoder.encode(msg)
+        if not self.tx_frames:
+            data = b"\x00" + data  # closes off whatever the far end had buffered (SPEC.md 3.2)
+        self.send_bytes(data)
         self.tx_frames += 1
 
     def send_bytes(self, data: bytes) -> None:
@@ -144,6 +147,8 @@ class SerialLink(Link):
         if inbox:
             return inbox.popleft()
         self._check_open()
+        if timeout_s is not None and timeout_s < 0:
+            timeout_s = 0.0
         deadline = None if timeout_s is None else time.monotonic() + timeout_s
         remaining = timeout_s
         while True:

@@ -33,12 +33,13 @@
 #define CTL_DEFAULT_ENCODER_LOSS_TIMEOUT_S 0.01f
 #define CTL_DEFAULT_ENCODER_LOSS_MIN_SPEED_RAD_S 10.0f
 
-/* python -m hil.ekf_design (DLQE by the discrete Riccati equation):
- * sigma_v = 0.0136077 rad, sigma_w = 0.00625 rad/s per period; estimator poles
- * at |s| = 568.5 rad/s. tests/test_stub_ekf_design.py checks these against the
- * design function. */
-#define CTL_DEFAULT_EKF_K1 0.056845621f
-#define CTL_DEFAULT_EKF_K2_RAD_S 32.0846424f
+/* python -m hil.ekf_design (DLQE by the discrete Riccati equation) for the
+ * documented noise model: sigma_v = 0.0136077 rad of flux-angle ripple,
+ * sigma_w = 0.00625 rad/s per period of speed-increment change; estimator
+ * poles at |s| = 568.5 rad/s. tests/test_stub_ekf_design.py checks these
+ * against the design function. */
+#define CTL_DEFAULT_EKF_K1 0.0568456203f
+#define CTL_DEFAULT_EKF_K2_RAD_S 32.0846443f
 #define CTL_DEFAULT_EKF_K3_RAD_S 0.446428746f
 
 #endif
