@@ -107,7 +107,7 @@ class Network:
             self._settle(t, y)
 
     def invalidate(self) -> None:
-        """Something outside changed (a parameter, the source voltage): re-check at the next interval."""
+        """Something outside changed (a parameter, the source voltage): re-check next time."""
         self._legs = None
 
     def set_driven(self, legs: tuple[int, int, int]) -> None:
@@ -147,9 +147,9 @@ class Network:
                     best = (g, tag)
             if best is None:
                 return
-            self._transition(best[1], y)
+            self._transition(t, best[1], y)
 
-    def _transition(self, tag: tuple, y: list[float]) -> None:
+    def _transition(self, t: float, tag: tuple, y: list[float]) -> None:
         kinds = list(self.kinds)
         if tag[0] == "i":
             kinds[tag[1]] = O
@@ -158,6 +158,8 @@ class Network:
         elif tag[0] == "lo":
             kinds[tag[1]] = P
         else:
+            self.rhs(t, y[0], y[1], y[2], y[3], y[4])      # the pair at this very state
+            self.event_values()
             out, into = self.release_pair
             if kinds[out] == O:
                 kinds[out] = N
@@ -343,7 +345,7 @@ class Network:
                 for i in range(3):
                     acc[i] += quad[i]
                 t += tau
-                self._transition(g0[j][1], y)
+                self._transition(t, g0[j][1], y)
                 self._settle(t, y)
             else:
                 y = y1

@@ -102,7 +102,9 @@ class Command:
         return hash((self.gates, self.duty))
 
     def __repr__(self) -> str:
-        return f"Command(gates={self.gates!r})" if self.duty is None else f"Command(duty={self.duty!r})"
+        if self.duty is None:
+            return f"Command(gates={self.gates!r})"
+        return f"Command(duty={self.duty!r})"
 
     @staticmethod
     def parse(gates: int | None, duty) -> "Command | None":
@@ -137,6 +139,18 @@ class Command:
         if d >= 1.0:
             return not low, ()
         return bool(low), (0.5 * period_s * (1.0 - d), 0.5 * period_s * (1.0 + d))
+
+
+def _drop_glitches(toggles: list[float], min_width: float) -> list[float]:
+    """Removes pulses narrower than min_width (an edge of the new command landing on the
+    computation delay up to rounding), which no gate driver would pass."""
+    out: list[float] = []
+    for t in toggles:
+        if out and t - out[-1] < min_width:
+            out.pop()
+        else:
+            out.append(t)
+    return out
 
 
 #: One shared Command per gate word, so an unchanged command is recognised by identity.
@@ -194,10 +208,13 @@ class SwitchTimeline:
             else:
                 start = new_state0
                 toggles.extend(new_edges)
+            toggles = _drop_glitches(toggles, 1e-9 * T)
             # On-intervals of the command, then of the switch (turn-on delayed by td).
             intervals = []
             on = start
-            rise = self._rise[j] if start and self._rise[j] is not None else (0.0 if start else None)
+            rise = None
+            if start:
+                rise = self._rise[j] if self._rise[j] is not None else 0.0
             for t in toggles:
                 if on:
                     intervals.append((rise, t))
@@ -246,26 +263,32 @@ class SwitchTimeline:
 
     def _word_intervals(self, actual: list[list[tuple[float, float]]]
                         ) -> list[tuple[float, float, int]]:
+        """Sweeps the six switches' on-intervals into constant-word intervals."""
         T = self.period_s
-        cuts = {0.0, T}
-        for switch_on in actual:
+        word = 0
+        toggles = []
+        for j, switch_on in enumerate(actual):
+            bit = 1 << j
             for a, b in switch_on:
-                cuts.add(a)
-                cuts.add(b)
-        points = sorted(c for c in cuts if 0.0 <= c <= T)
+                if a <= 0.0:
+                    word |= bit
+                else:
+                    toggles.append((a, bit))
+                if b < T:
+                    toggles.append((b, bit))
+        toggles.sort()
         out: list[tuple[float, float, int]] = []
-        for a, b in zip(points, points[1:]):
-            if b <= a:
-                continue
-            mid = 0.5 * (a + b)
-            word = 0
-            for j, switch_on in enumerate(actual):
-                for x, y in switch_on:
-                    if x <= mid < y:
-                        word |= 1 << j
-                        break
-            if out and out[-1][2] == word:
-                out[-1] = (out[-1][0], b, word)
-            else:
-                out.append((a, b, word))
+        t = 0.0
+        for when, bit in toggles:
+            if when > t:
+                if out and out[-1][2] == word:
+                    out[-1] = (out[-1][0], when, word)
+                else:
+                    out.append((t, when, word))
+                t = when
+            word ^= bit
+        if out and out[-1][2] == word:
+            out[-1] = (out[-1][0], T, word)
+        else:
+            out.append((t, T, word))
         return out

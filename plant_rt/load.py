@@ -66,7 +66,8 @@ class Load:
         self._set([now, now + duration_s], [self.profile(now), _finite(to_nm, "to_nm")])
 
     def set_table(self, rows: Iterable[tuple[float, float]]) -> None:
-        """[(t_s, torque_nm), ...] in absolute plant time, linear in between; times must not decrease."""
+        """[(t_s, torque_nm), ...] in absolute plant time, linear in between; times must not
+        decrease (two rows at the same time make a step)."""
         rows = [(_finite(t, "t_s"), _finite(v, "torque_nm")) for t, v in rows]
         if not rows:
             raise ValueError("a load table needs at least one (t_s, torque_nm) row")
@@ -106,7 +107,8 @@ class Load:
         return self.profile(t) + self.kw * w
 
     def segment(self, t: float) -> tuple[float, float, float]:
-        """(value at t, slope, next knot time > t or inf): profile(t + x) = value + slope x until then."""
+        """(value at t, slope, next knot > t or inf): profile(t + x) = value + slope x
+        until that knot."""
         ts, vs = self._t, self._v
         i = bisect.bisect_right(ts, t)
         if i == 0:

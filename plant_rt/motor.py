@@ -38,7 +38,7 @@ class MotorParams:
 
 
 class MotorModel:
-    """Derived constants and the stator/rotor maths on plain floats (no numpy: this is the hot path)."""
+    """Derived constants and the stator/rotor maths on plain floats (no numpy: hot path)."""
 
     __slots__ = ("params", "p", "r", "psim", "ld", "lq", "ild", "ilq", "j", "ij", "b", "kt", "spm",
                  "_k")
@@ -100,7 +100,7 @@ class MotorModel:
         t = 0.0
         if self.spm:
             # Ld = Lq = L: i = (psi - psi_m e_d)/L, so u - R i = u - (R/L) psi + (R psi_m/L) e_d
-            # and the psi_m terms cancel out of eq. (6): T = 1.5 p/L (c psi_beta - s psi_alpha) psi_m.
+            # and the psi_m terms cancel out of eq. (6): T = 1.5 p psi_m/L (c psi_b - s psi_a).
             ril = r * ild
             rk = r * psim * ild
             kti = kt * psim * ild

@@ -18,10 +18,10 @@ import dataclasses
 import math
 from math import cos, pi, sin
 
-from plant_rt.circuit import S32, Network
+from plant_rt.circuit import S32, ZERO_CURRENT_A, Network
 from plant_rt.dc_link import DcLink
 from plant_rt.inverter import (
-    GATE_COMMANDS, LEG_BITS, H, N, P, Command, InverterParams, SwitchTimeline, driven_vector,
+    GATE_COMMANDS, LEG_BITS, H, L, O, Command, InverterParams, SwitchTimeline, driven_vector,
     leg_states, shoot_through,
 )
 from plant_rt.load import Load
@@ -38,8 +38,11 @@ RPM_PER_RAD_S = 60.0 / TWO_PI
 TRUTH_FIELDS = ("t_s", "i_a", "i_b", "i_c", "i_alpha", "i_beta", "psi_alpha", "psi_beta",
                 "flux_mag_wb", "torque_nm", "speed_rad_s", "speed_rpm", "theta_e_rad",
                 "theta_m_rad", "v_dc", "i_dc", "load_torque_nm", "u_alpha", "u_beta")
-_NO_VECTOR = (0.0, 0.0, 0.0, 0.0, None)
 _SHOOT_THROUGH = tuple(shoot_through(g) for g in range(64))
+_LEG_STATES = tuple(leg_states(g) for g in range(64))
+#: (u_alpha, u_beta per volt of link, g_alpha, g_beta, leg states) per word, None if not driven.
+_UNIT_VECTORS = tuple(None if driven_vector(g, 1.0) is None
+                      else driven_vector(g, 1.0) + (leg_states(g),) for g in range(64))
 
 
 def wrap_angle(x: float) -> float:
@@ -81,8 +84,8 @@ class Plant:
         self._zero_current = False
         self._sample_k = -1
         self._sample: SensorSample | None = None
-        self._load_key = None
         self._load_seg = (0.0, 0.0, 0.0, math.inf)
+        self._seg_key = None
         self._rebuild()
 
     # --------------------------------------------------------------- helpers
@@ -99,26 +102,32 @@ class Plant:
             h = min(h, 0.5 * lmin * self.inverter.device_knee_a / self.inverter.device_drop_v)
         self._h_max = h
         self._n_fast = max(1, math.ceil(self._T / h - 1e-9))
-        vdc = self.dc_link.source_v
-        self._vectors = []
-        for word in range(64):
-            vec = driven_vector(word, vdc)
-            self._vectors.append(None if vec is None else vec + (leg_states(word),))
-        self.network.invalidate()
+        self._scale_vectors()
+        self._ir = 1.0 / m.r
+        self._load_key = None           # re-read the load (and the damping) at the next step
+        self._load_until = -math.inf
         self._fast_ok = self.dc_link.ideal and self.inverter.device_drop_v == 0.0
         self._timeline.dead_time_s = self.inverter.dead_time_s
         # Every gate command is one interval: no dead time, and no delay that could split it.
         self._one_interval = (self.inverter.dead_time_s == 0.0
                               and self.profile.timing.computation_delay_s == 0.0)
 
+    def _scale_vectors(self) -> None:
+        """Table 2 voltages of every driven gate word at the present source voltage."""
+        vdc = self.dc_link.source_v
+        self._vectors = [None if unit is None else
+                         (unit[0] * vdc, unit[1] * vdc, unit[2], unit[3], unit[4])
+                         for unit in _UNIT_VECTORS]
+        self.network.invalidate()
+
     def _load_segment(self, t: float) -> tuple[float, float, float]:
         """(profile value at t, slope, next knot) with a cache for the constant case."""
         key = self.load.version
         seg_t, v0, slope, t_next = self._load_seg
-        if key != self._load_key or not seg_t <= t < t_next:
+        if key != self._seg_key or not seg_t <= t < t_next:
             v0, slope, t_next = self.load.segment(t)
             self._load_seg = (t, v0, slope, t_next)
-            self._load_key = key
+            self._seg_key = key
             return v0, slope, t_next
         return v0 + slope * (t - seg_t), slope, t_next
 
@@ -140,19 +149,23 @@ class Plant:
             new = GATE_COMMANDS[gates]
         else:
             new = Command.parse(gates, duty)
+        self._cmd = new
         T = self._T
         t0 = self.period * T
-        th_start = self._th
+        th = self._th
         self._flags = 0
-        # Fast path: the whole period one driven Table 2 vector under a time-invariant load.
-        if (self._fast_gates and new.duty is None and t0 + T <= self._load_const_until
-                and self.load.version == self._load_key and (old is new or self._one_interval)):
-            va, vb, ga, gb, legs = vec = self._vectors[new.gates] or _NO_VECTOR
-            if vec is not _NO_VECTOR:
+        # Fast path: the whole period is one driven Table 2 vector (the paper's case).
+        vec = self._vectors[new.gates] if new.duty is None else None
+        if vec is not None and self._fast_ok and (old is new or self._one_interval):
+            if self.load.version != self._load_key or t0 + T > self._load_until:
+                self._refresh_load(t0)
+            if t0 + T <= self._load_until:
+                va, vb, ga, gb, legs = vec
                 pa0, pb0 = self._pa, self._pb
                 n = self._n_fast
-                pa, pb, self._w, th = self.motor.advance(
-                    pa0, pb0, self._w, th_start, va, vb, T / n, n, self._load_v0, 0.0,
+                pa, pb, self._w, th_end = self.motor.advance(
+                    pa0, pb0, self._w, th, va, vb, T / n, n,
+                    self._load_v0 + self._load_slope * (t0 - self._load_t), self._load_slope,
                     self._bw)
                 self._pa = pa
                 self._pb = pb
@@ -163,12 +176,22 @@ class Plant:
                     self.network.set_driven(legs)
                     self._net_dirty = False
                     self._zero_current = False
-                self._finish(th_start, th)
+                self._finish(th, th_end)
                 return
         self._general(t0, old, new)
-        self._finish(th_start, self._th)
+        self._finish(th, self._th)
+
+    def _refresh_load(self, t0: float) -> None:
+        """Caches the load's linear piece at t0 for the fast path (none while locked)."""
+        load = self.load
+        v0, slope, t_next = load.segment(t0)
+        self._load_key = load.version
+        self._load_t, self._load_v0, self._load_slope = t0, v0, slope
+        self._load_until = -math.inf if load.locked else t_next
+        self._bw = self.motor.b + load.kw
 
     def _finish(self, th_start: float, th: float) -> None:
+        """Index pulse, angle wrap, period count."""
         if (th_start >= 0.0) != (th >= 0.0):
             self._flags |= STATUS_INDEX_PULSE
         if th > pi:
@@ -199,10 +222,9 @@ class Plant:
                     if self._net_dirty:
                         net.set_driven(vec[4])
                         self._net_dirty = False
-                else:
-                    net.begin(t0 + a, y, leg_states(word))
-                    if not (fast and self._diode_interval(y, end - a, v0, slope, acc)):
-                        y = net.integrate(t0 + a, t0 + end, y, self._h_max, acc)
+                elif not (fast and self._diode_interval(y, word, end - a, v0, slope, acc)):
+                    net.begin(t0 + a, y, _LEG_STATES[word])
+                    y = net.integrate(t0 + a, t0 + end, y, self._h_max, acc)
                     self._net_dirty = True
                 a = end
         if self.load.locked:
@@ -231,30 +253,46 @@ class Plant:
         acc[1] += vb * length
         acc[2] += (ga * (va * length - (y[0] - pa0)) + gb * (vb * length - (y[1] - pb0))) / motor.r
 
-    def _diode_interval(self, y: list[float], length: float, v0: float, slope: float,
-                        acc: list[float]) -> bool:
+    def _diode_interval(self, y: list[float], word: int, length: float, v0: float,
+                        slope: float, acc: list[float]) -> bool:
         """An open leg whose diode conducts throughout is, with no device drop and an ideal
         link, the same as its switch on (low diode: 0 V, high diode: v_dc). Tries the fast RK4
         with that word and keeps it if no diode current reached zero; False leaves y as it
         was for the general network (dead time costs little away from current zeros)."""
-        net = self.network
-        if net.zero:
-            return False
-        word = 0
-        for x, k in enumerate(net.kinds):
-            word |= LEG_BITS[x][0] if k in (H, N) else LEG_BITS[x][1]
-        vec = self._vectors[word]
+        m = self.motor
+        e = m.p * y[3]
+        c, s = cos(e), sin(e)
+        i_d = (c * y[0] + s * y[1] - m.psim) * m.ild
+        i_q = (c * y[1] - s * y[0]) * m.ilq
+        ia, ib = c * i_d - s * i_q, s * i_d + c * i_q
+        cur = (ia, -0.5 * ia + S32 * ib, -0.5 * ia - S32 * ib)
+        legs = _LEG_STATES[word]
+        equivalent = 0
+        for x in range(3):
+            side = legs[x]
+            if side == O:
+                if cur[x] > ZERO_CURRENT_A:
+                    side = L                    # current into the motor: low diode
+                elif cur[x] < -ZERO_CURRENT_A:
+                    side = H
+                else:
+                    return False                # at zero: the network decides what follows
+            equivalent |= LEG_BITS[x][0] if side == H else LEG_BITS[x][1]
+        vec = self._vectors[equivalent]
         trial = list(y)
         part = [0.0, 0.0, 0.0]
         self._advance(trial, vec, length, v0, slope, part)
-        ia, ib, _, _ = self.motor.currents(trial[0], trial[1], trial[3])
-        cur = (ia, -0.5 * ia + S32 * ib, -0.5 * ia - S32 * ib)
-        for x, k in enumerate(net.kinds):
-            if (k == P and cur[x] <= 0.0) or (k == N and cur[x] >= 0.0):
+        ia, ib, _, _ = m.currents(trial[0], trial[1], trial[3])
+        after = (ia, -0.5 * ia + S32 * ib, -0.5 * ia - S32 * ib)
+        for x in range(3):
+            if legs[x] == O and (after[x] > 0.0) != (cur[x] > 0.0):
                 return False
         y[:] = trial
         for i in range(3):
             acc[i] += part[i]
+        if self._net_dirty:
+            self.network.set_driven(vec[4])     # the diode legs behaved as driven ones
+            self._net_dirty = False
         return True
 
     def safe_state(self) -> None:
@@ -308,7 +346,7 @@ class Plant:
         self.dc_link.source_v = v
         if self.dc_link.ideal:
             self._vdc = v
-        self._rebuild()
+        self._scale_vectors()
 
     def set_motor_param(self, name: str, value: float) -> None:
         """Changes a motor constant while running (a hotter winding, a weaker magnet...).
@@ -320,8 +358,10 @@ class Plant:
         try:
             value = coerce(type(self.motor.params), name, value)
         except KeyError:
-            names = [f.name for f in dataclasses.fields(self.motor.params) if f.name != "pole_pairs"]
-            raise ValueError(f"unknown motor parameter {name!r} (known: {', '.join(names)})") from None
+            names = [f.name for f in dataclasses.fields(self.motor.params)
+                     if f.name != "pole_pairs"]
+            raise ValueError(f"unknown motor parameter {name!r} "
+                             f"(known: {', '.join(names)})") from None
         except ValueError as exc:
             raise ValueError(f"motor parameter {name}: {exc}") from None
         _, _, i_d, i_q = self.motor.currents(self._pa, self._pb, self._th)

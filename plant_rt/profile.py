@@ -98,7 +98,8 @@ def load_profile(path: str | Path | None = None,
     marks: set[tuple] = set()
     if overrides:
         if not isinstance(overrides, dict):
-            raise ConfigError("overrides must be a mapping of sections", f"{doc.source} (overrides)")
+            raise ConfigError("overrides must be a mapping of sections",
+                              f"{doc.source} (overrides)")
         if not isinstance(data, dict):
             raise doc.error((), "a bench profile is a mapping of sections")
         data = copy.deepcopy(data)
@@ -156,8 +157,8 @@ def _controller(data: Any, err: Callable[[tuple, str], ConfigError]) -> dict[str
     for key, value in data.items():
         path = ("controller", key)
         if key not in CONTROLLER_PARAMS:
-            raise err(path, "unknown controller parameter (known: "
-                            f"{', '.join(p for p in CONTROLLER_PARAMS if p not in READ_ONLY_PARAMS)})")
+            settable = [p for p in CONTROLLER_PARAMS if p not in READ_ONLY_PARAMS]
+            raise err(path, f"unknown controller parameter (known: {', '.join(settable)})")
         if key in READ_ONLY_PARAMS:
             raise err(path, "read-only controller parameter: the board reports it, the bench "
                             "cannot set it")

@@ -238,6 +238,143 @@ def test_safe_state_at_rated_speed_decays_through_diodes_then_stays_zero():
     assert abs(s.adc_i1 - 2048) <= 3 and abs(s.adc_i2 - 2048) <= 3   # zero current, 0.5 count noise
 
 
+def diode_bridge_reference(motor, vdc: float, state: list[float], t_end: float):
+    """All legs open, surface magnets, ideal link, in phase quantities: every conducting phase
+    sits on the rail of its diode (high: vdc, low: 0). Three conducting: V_n = sum(V)/3;
+    two (x, y): 2L di/dt = V_x - V_y - 2 R i - (e_x - e_y) and the third floats at
+    V_z = (V_x + V_y - e_x - e_y)/2 + e_z until it reaches a rail, where that diode turns
+    on; none: the largest line back-EMF turns a pair on once it exceeds vdc. A conducting
+    phase stops when its current returns to zero. Returns t -> (i_a, i_b, i_c, w) and the
+    list of (time, what happened)."""
+    p, r, psim, L = motor.pole_pairs, motor.resistance_ohm, motor.flux_linkage_wb, \
+        motor.inductance_d_h
+    j, b = motor.inertia_kgm2, motor.damping_nm_per_rad_s
+
+    def emf(th, w):
+        return [-p * w * psim * math.sin(p * th - 2 * math.pi * k / 3) for k in range(3)]
+
+    def rail(side):
+        return vdc if side == "H" else 0.0
+
+    def float_voltage(sides, x):
+        ia, ib, w, th = x
+        e = emf(th, w)
+        a, c = sorted(sides)
+        z = 3 - a - c
+        return (rail(sides[a]) + rail(sides[c]) - e[a] - e[c]) / 2 + e[z]
+
+    def rhs(sides):
+        def f(_t, x):
+            ia, ib, w, th = x
+            i = [ia, ib, -ia - ib]
+            e = emf(th, w)
+            d = [0.0, 0.0, 0.0]
+            if len(sides) == 3:
+                v = [rail(sides[k]) for k in range(3)]
+                d = [(v[k] - sum(v) / 3 - r * i[k] - e[k]) / L for k in range(3)]
+            elif len(sides) == 2:
+                a, c = sorted(sides)
+                di = (rail(sides[a]) - rail(sides[c]) - 2 * r * i[a] - (e[a] - e[c])) / (2 * L)
+                d[a], d[c] = di, -di
+            torque = sum(e[k] * i[k] for k in range(3)) / w
+            return [d[0], d[1], (torque - b * w) / j, w]
+        return f
+
+    def events_for(sides):
+        evs = []
+        for k, side in sides.items():
+            def ev(_t, x, k=k):
+                return (x[0], x[1], -x[0] - x[1])[k]
+            ev.terminal, ev.direction = True, (1 if side == "H" else -1)
+            evs.append((ev, ("stop", k)))
+        if len(sides) == 2:
+            def hi(_t, x, sides=dict(sides)):
+                return float_voltage(sides, x) - vdc
+            def lo(_t, x, sides=dict(sides)):
+                return float_voltage(sides, x)
+            hi.terminal, hi.direction = True, 1
+            lo.terminal, lo.direction = True, -1
+            z = 3 - sum(sides)
+            evs += [(hi, ("on", z, "H")), (lo, ("on", z, "L"))]
+        if not sides:
+            def line(_t, x):
+                e = emf(x[3], x[2])
+                return max(e) - min(e) - vdc
+            line.terminal, line.direction = True, 1
+            evs.append((line, ("pair",)))
+        return evs
+
+    def pair_on(x, sides):
+        e = emf(x[3], x[2])
+        sides[e.index(max(e))] = "H"      # current leaves the motor through the high diode
+        sides[e.index(min(e))] = "L"
+
+    sides: dict[int, str] = {}
+    t, x, pieces, log = 0.0, list(state), [], []
+    e0 = emf(x[3], x[2])
+    if max(e0) - min(e0) > vdc:
+        pair_on(x, sides)
+        log.append((0.0, "pair"))
+    while t < t_end:
+        evs = events_for(sides)
+        sol = solve_ivp(rhs(dict(sides)), (t, t_end), x, method="DOP853", rtol=1e-12,
+                        atol=1e-13, events=[e for e, _ in evs], dense_output=True)
+        pieces.append((t, sol.t[-1], sol.sol))
+        x, t = list(sol.y[:, -1]), sol.t[-1]
+        if sol.status != 1:
+            break
+        what = [tag for n, (_, tag) in enumerate(evs) if len(sol.t_events[n])][0]
+        log.append((t, what[0]))
+        if what[0] == "stop":
+            del sides[what[1]]
+            i = [x[0], x[1], -x[0] - x[1]]
+            i[what[1]] = 0.0
+            if len(sides) == 2:
+                a, c = sorted(sides)
+                i[c] = -i[a]
+            else:
+                sides.clear()
+                i = [0.0, 0.0, 0.0]
+            x[0], x[1] = i[0], i[1]
+        elif what[0] == "on":
+            sides[what[1]] = what[2]
+        else:
+            pair_on(x, sides)
+
+    def at(tq):
+        for a, b_, sol in pieces:
+            if a <= tq <= b_:
+                y = sol(tq)
+                return y[0], y[1], -y[0] - y[1], y[2]
+        raise ValueError(tq)
+    return at, log
+
+
+def test_diode_bridge_rectifying_at_twice_rated_speed_matches_reference():
+    """All switches off at twice rated speed: the line back-EMF (101 V) exceeds the 70 V link,
+    so the diodes rectify in pulses: pairs turn on, a floating third phase reaches a rail and
+    joins, currents return to zero. The plant follows the phase-circuit reference through
+    every one of these turn-on and turn-off events."""
+    w0 = 2 * RATED_RAD_S
+    profile = load_profile(overrides={"initial": {"speed_rad_s": w0, "theta_m_rad": 0.2}})
+    T = profile.control_period_s
+    n = 400
+    ref, log = diode_bridge_reference(profile.motor, 70.0, [0.0, 0.0, w0, 0.2], n * T)
+    kinds = {what for _, what in log}
+    assert kinds == {"pair", "on", "stop"} and len(log) > 20
+    plant = Plant(profile)
+    peak = worst = 0.0
+    for k in range(1, n + 1):
+        plant.step()
+        t = plant.truth()
+        ia, ib, ic, w = ref(k * T)
+        peak = max(peak, abs(ia), abs(ib), abs(ic))
+        worst = max(worst, abs(t[F["i_a"]] - ia), abs(t[F["i_b"]] - ib), abs(t[F["i_c"]] - ic))
+        assert abs(t[F["speed_rad_s"]] - w) < 1e-7 * w
+    assert peak > 5.0
+    assert worst < 1e-6 * peak
+
+
 @pytest.mark.parametrize("ld,lq", [(4.8e-3, 4.8e-3), (3.0e-3, 7.0e-3)])
 def test_safe_state_energy_returned_to_link(ld, lq):
     """During the diode decay (Ld = Lq and Ld != Lq) the energy the link receives equals the
@@ -259,8 +396,8 @@ def test_safe_state_energy_returned_to_link(ld, lq):
     a = np.array(rows)
     assert np.all(a[-200:, F["i_a"]] == 0.0) and np.all(a[-200:, F["i_b"]] == 0.0)
     e_link = -np.sum(a[1:, F["v_dc"]] * a[1:, F["i_dc"]]) * T
-    copper = np.trapezoid(1.5 * m.resistance_ohm * (a[:, F["i_alpha"]] ** 2 + a[:, F["i_beta"]] ** 2),
-                      dx=T)
+    i_sq = a[:, F["i_alpha"]] ** 2 + a[:, F["i_beta"]] ** 2
+    copper = np.trapezoid(1.5 * m.resistance_ohm * i_sq, dx=T)
     w = a[:, F["speed_rad_s"]]
     damping = np.trapezoid(m.damping_nm_per_rad_s * w ** 2, dx=T)
     kinetic = 0.5 * m.inertia_kgm2 * (w[0] ** 2 - w[-1] ** 2)

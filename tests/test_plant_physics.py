@@ -285,7 +285,8 @@ def run_pair(coarse: dict, fine: dict, n: int, commands, fine_sequence, steps_pe
             u_fine[1] += tb[F["u_beta"]] / steps_per
         ta = a.truth()
         assert ta[F["t_s"]] == pytest.approx(tb[F["t_s"]], abs=1e-12)
-        worst["i"] = max(worst["i"], abs(ta[F["i_a"]] - tb[F["i_a"]]), abs(ta[F["i_b"]] - tb[F["i_b"]]))
+        worst["i"] = max(worst["i"], abs(ta[F["i_a"]] - tb[F["i_a"]]),
+                         abs(ta[F["i_b"]] - tb[F["i_b"]]))
         worst["w"] = max(worst["w"], abs(ta[F["speed_rad_s"]] - tb[F["speed_rad_s"]]))
         worst["th"] = max(worst["th"], abs(ta[F["theta_m_rad"]] - tb[F["theta_m_rad"]]))
         worst["u"] = max(worst["u"], abs(ta[F["u_alpha"]] - u_fine[0]),
@@ -328,6 +329,49 @@ def test_computation_delay_applies_new_gates_mid_period():
     worst = run_pair(coarse, fine, len(words), [{"gates": w} for w in words],
                      lambda k: [words[k - 1] if k else 0] * 2 + [words[k]] * 3, 5)
     assert worst["i"] < 1e-9 and worst["w"] < 1e-9 and worst["u"] < 1e-9
+
+
+def test_dead_time_and_delay_timeline_matches_explicit_switch_sequence():
+    """Duties with 2 us dead time and a 10 us computation delay at 50 us, against a 1 us plant
+    fed the switch states built here: command = previous duty before 10 us, new after;
+    centre-aligned high-side window; a switch is on once its command has been on for 2 us
+    (across period boundaries); otherwise the leg is open and its diodes conduct.
+    The delay 10 * 1e-6 is 9.999999999999999e-06: new-duty edges at 10 us land on it up to
+    rounding, which must not become a femtosecond glitch followed by a dead time."""
+    n_sub, td_sub, delay_sub = 50, 2, 10
+    rng = random.Random(9)
+    duties = [tuple(rng.randrange(0, 26) * 2 / n_sub for _ in range(3)) for _ in range(150)]
+    desired = []                                   # per 1 us slot: (high, low) per leg
+
+    def slot_words(k):
+        words = []
+        for j in range(n_sub):
+            d = duties[k] if j >= delay_sub else (duties[k - 1] if k else None)
+            t_rel = (j + 0.5) / n_sub
+            slot = []
+            for x in range(3):
+                if d is None:
+                    slot.append((False, False))          # the initial all-open command
+                else:
+                    high = abs(t_rel - 0.5) < d[x] / 2
+                    slot.append((high, not high))
+            desired.append(slot)
+            word = 0
+            for x in range(3):
+                for side in (0, 1):
+                    if all(len(desired) - 1 - back >= 0 and desired[-1 - back][x][side]
+                           for back in range(td_sub + 1)):
+                        word |= 1 << (2 * x + side)
+            words.append(word)
+        return words
+    start = {"initial": {"speed_rad_s": 150.0, "theta_m_rad": -0.4},
+             "load": {"torque_nm": 0.1}}
+    worst = run_pair(
+        {**start, "inverter": {"dead_time_s": td_sub * 1e-6},
+         "timing": {"computation_delay_s": delay_sub * 1e-6}},
+        {**start, "timing": {"control_period_s": 1e-6, "max_step_s": 1e-6}},
+        len(duties), [{"duty": d} for d in duties], slot_words, n_sub)
+    assert worst["i"] < 1e-9 and worst["w"] < 1e-9 and worst["u"] < 1e-8
 
 
 def test_full_period_delay_holds_previous_gates_for_the_whole_period():

@@ -134,7 +134,8 @@ def rounded_gaussian_rms(sigma: float) -> float:
     """rms of round(sigma * n), n standard normal."""
     total = 0.0
     for k in range(1, 12):
-        p = 0.5 * (math.erf((k + 0.5) / sigma / math.sqrt(2)) - math.erf((k - 0.5) / sigma / math.sqrt(2)))
+        s = sigma * math.sqrt(2)
+        p = 0.5 * (math.erf((k + 0.5) / s) - math.erf((k - 0.5) / s))
         total += 2 * k * k * p
     return math.sqrt(total)
 

@@ -39,11 +39,16 @@ def test_lockstep_runs_are_identical_bit_for_bit(link):
         np.testing.assert_array_equal(first[name][1], second[name][1], err_msg=name)
 
 
-def test_stub_pty_matches_in_process_stub():
-    """The same firmware over a pseudo-terminal and in-process gives the same run."""
-    in_process, _ = _short_run("stub", 400)
-    over_pty, _ = _short_run("stub-pty", 400)
-    np.testing.assert_array_equal(in_process["plant.i_a"][1], over_pty["plant.i_a"][1])
+@pytest.mark.parametrize("link", ["stub-pty", "stub-can"])
+def test_process_links_match_the_in_process_stub(link):
+    """The same firmware over a pseudo-terminal (serial framing, or SLCAN through python-can's
+    slcan interface) and in-process gives the same run: both framings carry the same values."""
+    in_process, _ = _short_run("stub", 200)
+    over_link, session = _short_run(link, 200)
+    np.testing.assert_array_equal(in_process["plant.i_a"][1], over_link["plant.i_a"][1])
+    np.testing.assert_array_equal(in_process["ctrl.speed_ekf_rad_s"][1],
+                                  over_link["ctrl.speed_ekf_rad_s"][1])
+    assert session.board_name.startswith("hil-stub")
 
 
 def test_hello_version_mismatch_names_both_versions():

@@ -46,7 +46,7 @@ typedef struct {
     hil_can_rx can_rx;
     hil_stub_counters counters;
     uint32_t (*read_cycles)(void);
-    uint32_t last_period;   /* of the last SAMPLE */
+    uint32_t next_period;   /* the period the next SAMPLE is expected to carry */
     uint32_t heartbeats;    /* HEARTBEATs sent */
     uint32_t version_errors_seen; /* decoder version errors already answered with HELLO */
     uint16_t can_base;
@@ -131,41 +131,40 @@ static void emit(hil_stub *s, hil_msg *m)
     s->seq++;
 }
 
-static void emit_status(hil_stub *s)
+/* STATUS for a state that changed at `period` */
+static void emit_status(hil_stub *s, uint32_t period)
 {
     hil_msg m;
     m.type = HIL_MSG_STATUS;
-    m.u.status.period = s->last_period;
+    m.u.status.period = period;
     m.u.status.state = s->core.st.state;
     m.u.status.fault_code = s->core.st.fault_code;
     s->reported_state = s->core.st.state;
     emit(s, &m);
 }
 
-/* A state change the bench has not heard of: FAULT first when it is a trip, then STATUS. */
-static void report_state(hil_stub *s)
+/* A trip the bench has not heard of: FAULT once, then STATUS (SPEC.md 2.5). */
+static void report_fault(hil_stub *s)
 {
-    if (s->core.st.state == s->reported_state) {
+    if (s->core.st.state != HIL_STATE_FAULT || s->reported_state == HIL_STATE_FAULT) {
         return;
     }
-    if (s->core.st.state == HIL_STATE_FAULT) {
-        hil_msg m;
-        m.type = HIL_MSG_FAULT;
-        m.u.fault.period = s->core.st.fault_period;
-        m.u.fault.code = s->core.st.fault_code;
-        m.u.fault.value = s->core.st.fault_value;
-        emit(s, &m);
-    }
-    emit_status(s);
+    hil_msg m;
+    m.type = HIL_MSG_FAULT;
+    m.u.fault.period = s->core.st.fault_period;
+    m.u.fault.code = s->core.st.fault_code;
+    m.u.fault.value = s->core.st.fault_value;
+    emit(s, &m);
+    emit_status(s, s->core.st.fault_period);
 }
 
 static void on_sample(hil_stub *s, const hil_sample *sample)
 {
     hil_msg m;
-    s->last_period = sample->period;
-    uint32_t c0 = s->read_cycles ? s->read_cycles() : 0u;
+    s->next_period = sample->period + 1u;
     uint32_t div = s->core.params.telemetry_divider;
     int want_telemetry = div != 0u && sample->period % div == 0u;
+    uint32_t c0 = s->read_cycles ? s->read_cycles() : 0u;
     uint8_t gates = ctl_step(&s->core, sample, want_telemetry ? &m.u.telemetry : NULL);
     if (s->read_cycles) {
         s->core.st.step_cycles = s->read_cycles() - c0;
@@ -179,22 +178,20 @@ static void on_sample(hil_stub *s, const hil_sample *sample)
         m.type = HIL_MSG_TELEMETRY;
         emit(s, &m);
     }
-    report_state(s);
+    report_fault(s);
 }
 
 static void on_command(hil_stub *s, const hil_command *cmd)
 {
     if (ctl_set_command(&s->core, cmd) != 0) {
         /* an unknown speed source is a bench bug: stop switching and say why */
-        ctl_state *st = &s->core.st;
-        st->state = HIL_STATE_FAULT;
-        st->fault_code = HIL_FAULT_PROTOCOL;
-        st->fault_value = (float)cmd->speed_source;
-        st->fault_period = s->last_period;
-        report_state(s);
+        ctl_trip(&s->core, HIL_FAULT_PROTOCOL, (float)cmd->speed_source, s->next_period);
+        report_fault(s);
         return;
     }
-    emit_status(s);
+    if (s->core.st.state != s->reported_state) {
+        emit_status(s, s->next_period); /* applies from the next SAMPLE on */
+    }
 }
 
 static void on_param(hil_stub *s, const hil_msg *in)
@@ -263,7 +260,7 @@ static void dispatch(hil_stub *s, const hil_msg *in)
         hil_command off = {0u, s->core.cmd.speed_source, 0.0f, 0.0f, 0.0f};
         (void)ctl_set_command(&s->core, &off);
         s->shutdown = 1u;
-        emit_status(s);
+        emit_status(s, s->next_period);
         break;
     }
     default:

@@ -3,17 +3,20 @@
  * sample sequence (a rotor turning at 150 rad/s with a rotating 8 A current
  * and its encoder) in one speed-source mode.
  *
- *   step_driver MODE STEPS [TELEMETRY_EVERY]
+ *   step_driver MODE STEPS [TELEMETRY_EVERY [baseline]]
  *     MODE 0 encoder, 1 conventional, 2 EKF; telemetry filled every
- *     TELEMETRY_EVERY steps (default 1: every step; 0: never)
+ *     TELEMETRY_EVERY steps (default 1: every step; 0: never); "baseline"
+ *     runs the same program without calling ctl_step.
  *
- * The samples are generated before the timed loop, so counting only inside
- * ctl_step (callgrind --toggle-collect=ctl_step) or subtracting a STEPS = 0
- * run both give the instructions of the control step alone.
+ * The samples are generated before the loop, so counting only inside
+ * ctl_step (callgrind --toggle-collect=ctl_step) and subtracting the baseline
+ * run's total from the full run's both give the instructions of the control
+ * step; bench/stub.py reports both.
  */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
+#include <string.h>
 
 #include "control.h"
 
@@ -21,15 +24,25 @@
 
 static hil_sample samples[MAX_STEPS];
 
+/* stands in for ctl_step in the baseline run: one instruction, "return 0" */
+static uint8_t skip_step(ctl *c, const hil_sample *s, hil_telemetry *tm)
+{
+    (void)c;
+    (void)s;
+    (void)tm;
+    return 0u;
+}
+
 int main(int argc, char **argv)
 {
-    if (argc != 3 && argc != 4) {
-        fprintf(stderr, "usage: step_driver MODE STEPS [TELEMETRY_EVERY]\n");
+    if (argc < 3 || argc > 5 || (argc == 5 && strcmp(argv[4], "baseline") != 0)) {
+        fprintf(stderr, "usage: step_driver MODE STEPS [TELEMETRY_EVERY [baseline]]\n");
         return 2;
     }
     int mode = atoi(argv[1]);
     int steps = atoi(argv[2]);
-    int telemetry_every = argc == 4 ? atoi(argv[3]) : 1;
+    int telemetry_every = argc >= 4 ? atoi(argv[3]) : 1;
+    int baseline = argc == 5;
     if (mode < 0 || mode > 2 || steps < 0 || steps > MAX_STEPS) {
         fprintf(stderr, "step_driver: MODE in 0..2, STEPS in 0..%d\n", MAX_STEPS);
         return 2;
@@ -55,10 +68,13 @@ int main(int argc, char **argv)
     }
     hil_telemetry tm;
     unsigned gates_or = 0;
+    /* the function is called through a volatile pointer in both runs, so the
+     * baseline keeps the loop, the call and the argument set-up */
+    uint8_t (*volatile step)(ctl *, const hil_sample *, hil_telemetry *) = baseline ? skip_step : ctl_step;
     for (int k = 0; k < steps; ++k) {
         /* with telemetry every `telemetry_every` steps (0: never) */
         int with_tm = telemetry_every > 0 && k % telemetry_every == 0;
-        gates_or |= ctl_step(&c, &samples[k], with_tm ? &tm : NULL);
+        gates_or |= step(&c, &samples[k], with_tm ? &tm : NULL);
     }
     /* keep the results live and check the drive kept switching */
     printf("state %u gates %02x\n", (unsigned)c.st.state, gates_or);

@@ -169,6 +169,14 @@ int ctl_set_command(ctl *c, const hil_command *cmd)
     return 0;
 }
 
+void ctl_trip(ctl *c, uint8_t fault_code, float value, uint32_t period)
+{
+    c->st.state = HIL_STATE_FAULT;
+    c->st.fault_code = fault_code;
+    c->st.fault_value = value;
+    c->st.fault_period = period;
+}
+
 /* Flux from the encoder angle for a surface-magnet motor, and every flux-based
  * estimator aligned with it. */
 static void track_encoder(ctl *c, const clarke_out *i)
@@ -237,10 +245,7 @@ uint8_t ctl_step(ctl *c, const hil_sample *s, hil_telemetry *tm)
             fault = prot_encoder_loss(&k->prot, &st->prot, s->encoder, speed_ekf, source == HIL_SPEED_ENCODER, &value);
         }
         if (fault != PROT_FAULT_NONE) {
-            st->state = HIL_STATE_FAULT;
-            st->fault_code = fault;
-            st->fault_value = value;
-            st->fault_period = s->period;
+            ctl_trip(c, fault, value, s->period);
         } else {
             if (c->cmd.torque_mode) {
                 torque_ref = clamp_abs(c->cmd.torque_ref_nm, k->pi.torque_limit_nm);

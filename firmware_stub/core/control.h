@@ -16,7 +16,7 @@
 
 #include <stdint.h>
 
-#include "../../protocol/c/hil_proto.h"
+#include "hil_proto.h"
 #include "clarke.h"
 #include "flux_observer.h"
 #include "hysteresis.h"
@@ -129,6 +129,9 @@ void ctl_derive(ctl *c);
  * clearing ENABLE stops switching and clears a latched fault. Returns 0, or -1
  * (command ignored) for an unknown speed source. */
 int ctl_set_command(ctl *c, const hil_command *cmd);
+
+/* Latches a fault: switches off from now on, state FAULT until disabled. */
+void ctl_trip(ctl *c, uint8_t fault_code, float value, uint32_t period);
 
 /* One control period. Returns the gates to apply until the next SAMPLE. With
  * tm not NULL, also fills every telemetry field, including the telemetry-only

@@ -122,9 +122,11 @@ static int open_serial(const char *path, speed_t baud)
 static void usage(FILE *f)
 {
     fprintf(f, "usage: hil-stub --serial PATH [--baud N] | --stdio | --slcan PATH [--can-base ID] [--baud N]\n"
+               "                | --slcan-stdio [--can-base ID]\n"
                "  --serial PATH   protocol frames over a serial device or pseudo-terminal (raw mode)\n"
                "  --stdio         protocol frames over stdin/stdout\n"
                "  --slcan PATH    CAN frames as SLCAN (Lawicel) ASCII over a serial device\n"
+               "  --slcan-stdio   SLCAN over stdin/stdout (e.g. the master side of a pseudo-terminal)\n"
                "  --can-base ID   first CAN identifier of the mapping (default 0x%03X)\n"
                "  --baud N        line rate of a real serial device (default 115200; ignored by ptys)\n"
                "  --version       print the HELLO name and exit\n",
@@ -186,6 +188,7 @@ int main(int argc, char **argv)
     const char *serial_path = NULL;
     const char *slcan_path = NULL;
     int use_stdio = 0;
+    int slcan_stdio = 0;
     long can_base = HIL_CAN_DEFAULT_BASE_ID;
     long baud = 115200;
     for (int i = 1; i < argc; ++i) {
@@ -200,6 +203,10 @@ int main(int argc, char **argv)
             ++i;
         } else if (strcmp(a, "--stdio") == 0) {
             use_stdio = 1;
+        } else if (strcmp(a, "--slcan-stdio") == 0) {
+            /* SLCAN over stdin/stdout: the bench hands over one end of a pseudo-terminal */
+            use_stdio = 1;
+            slcan_stdio = 1;
         } else if (strcmp(a, "--can-base") == 0 && next) {
             can_base = strtol(next, &end, 0);
             if (*next == '\0' || *end != '\0' || can_base < 0 || can_base > 0x7FF - 0x3F) {
@@ -227,7 +234,7 @@ int main(int argc, char **argv)
         }
     }
     if ((serial_path != NULL) + (slcan_path != NULL) + use_stdio != 1) {
-        fprintf(stderr, "hil-stub: give exactly one of --serial, --slcan, --stdio\n");
+        fprintf(stderr, "hil-stub: give exactly one of --serial, --slcan, --stdio, --slcan-stdio\n");
         usage(stderr);
         return 2;
     }
@@ -260,7 +267,7 @@ int main(int argc, char **argv)
         out.fd = in_fd;
         out.what = name;
     }
-    int status = serve(in_fd, &out, name, slcan_path != NULL, stub);
+    int status = serve(in_fd, &out, name, slcan_path != NULL || slcan_stdio, stub);
     if (!use_stdio) {
         close(in_fd);
     }
