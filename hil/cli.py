@@ -41,6 +41,12 @@ def _parser() -> argparse.ArgumentParser:
                        help="Modbus TCP control port (default 127.0.0.1:5020; 'off' to disable)")
     serve.add_argument("--duration", type=float, help="simulated seconds to run (default: until Ctrl-C)")
     serve.add_argument("--log", type=Path, help="MCAP log path")
+    serve.add_argument("--speed-rpm", type=float, default=0.0,
+                       help="speed reference sent to the board (default 0)")
+    serve.add_argument("--speed-source", choices=("encoder", "conventional", "ekf"), default="encoder",
+                       help="speed feedback the board closes its loop on (default encoder)")
+    serve.add_argument("--enable", action="store_true",
+                       help="enable the board at start (otherwise: Modbus run bit)")
 
     log = sub.add_parser("log", help="inspect an MCAP log", description="Inspect an MCAP log of a run.")
     log_sub = log.add_subparsers(dest="log_command", required=True, metavar="ACTION")

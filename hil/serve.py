@@ -32,7 +32,7 @@ def serve_command(args) -> int:
     profile = load_profile(args.profile)
     config = SessionConfig(link=args.link, mode=args.mode, log_path=args.log)
     mailbox = ControlMailbox(load_torque_nm=profile.load.torque_nm,
-                             dc_link_voltage_v=profile.dc_link.source_voltage_v)
+                             dc_link_voltage_v=profile.dc_link.source_voltage_v, run=args.enable)
     port = None
     if args.modbus and args.modbus != "off":
         host, number = parse_host_port(args.modbus)
@@ -44,6 +44,8 @@ def serve_command(args) -> int:
     total = None if args.duration is None else round(args.duration / profile.control_period_s)
     with BenchSession(profile, config) as session:
         session.attach_mailbox(mailbox)
+        session.send_command(enable=args.enable, speed_source=args.speed_source,
+                             speed_ref_rpm=args.speed_rpm)
         if port is not None:
             port.start()
         where = f", Modbus TCP on {port.host}:{port.port}" if port is not None else ""

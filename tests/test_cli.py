@@ -91,11 +91,15 @@ def test_plans_lists_and_validates(tmp_path, capsys):
 def test_serve_runs_the_plant_against_the_stub_for_a_duration(tmp_path):
     log = tmp_path / "serve.mcap"
     proc = subprocess.run([sys.executable, "-m", "hil.cli", "serve", "--link", "stub", "--duration",
-                           "0.02", "--modbus", "off", "--log", str(log)],
+                           "0.02", "--modbus", "off", "--log", str(log), "--enable",
+                           "--speed-rpm", "1000"],
                           capture_output=True, text=True, timeout=120, cwd=REPO)
     assert proc.returncode == 0, proc.stderr
     assert "400 periods" in proc.stderr
-    assert log.stat().st_size > 0
+    from hil.log_reader import read_log
+
+    truth = read_log(log)["/plant/truth"]
+    assert len(truth) == 400 and truth["speed_rpm"][-1] > 50.0  # the board drove the motor
 
 
 def test_help_for_every_command():
