@@ -6,8 +6,16 @@ splits them at the 0x00 delimiters and decodes them with its own stream
 decoder. In between, each frame may be dropped, corrupted (bits flipped),
 delayed by N periods, duplicated or swapped with the next one, or swallowed
 by an unplugged cable — in either direction, at a rate, from a seeded random
-generator per direction, so the same seed and the same traffic give the same
-faults. Counters say what was done to how many frames.
+generator per direction (the session's seed, or the fault's own ``seed``), so
+the same seed and the same traffic give the same faults. Counters say what was
+done to how many frames.
+
+Corruption flips bits inside a frame and never creates or removes a 0x00
+delimiter (a flip that would is drawn again): each corrupted frame is exactly
+one bad candidate frame at the receiver (one CRC or framing error), so the
+receivers' error counters reconcile exactly with ``*_corrupted``. Damage to a
+delimiter (which merges or splits frames) is what the unplug and drop faults
+and the decoders' own tests cover.
 
 Links that carry frames rather than bytes (CAN) are not tapped.
 """
@@ -32,6 +40,17 @@ class LinkFault:
     periods: int = 1          # delay: how long frames are held
     direction: str = "both"   # out | in | both
     until_period: int | None = None  # lifted at this period (None: until cleared)
+    seed: int | None = None   # its own random streams (None: the tap's, seeded by the session)
+
+    def __post_init__(self) -> None:
+        if self.direction not in ("both", *DIRECTIONS):
+            raise ValueError(f"link fault direction must be out, in or both, got {self.direction!r}")
+        if not 0.0 <= self.rate <= 1.0:
+            raise ValueError(f"link fault rate must be in [0, 1], got {self.rate!r}")
+        if self.bits < 1 or self.periods < 1:
+            raise ValueError("link fault bits and periods must be >= 1")
+        self._rng = ({d: random.Random(f"{self.seed}:{d}:{self.kind}") for d in DIRECTIONS}
+                     if self.seed is not None else None)
 
     def applies_to(self, direction: str) -> bool:
         return self.direction in ("both", direction)
@@ -102,11 +121,11 @@ class LinkTap:
     def _apply(self, direction: str, frame: bytes) -> list[bytes]:
         stats = self.stats
         stats[f"{direction}_frames"] += 1
-        rng = self._rng[direction]
         frames = [frame]
         for fault in self.faults.values():
             if not fault.applies_to(direction):
                 continue
+            rng = fault._rng[direction] if fault._rng is not None else self._rng[direction]
             kind = fault.kind
             if kind == "unplug":
                 stats[f"{direction}_unplugged"] += len(frames)
@@ -118,12 +137,8 @@ class LinkTap:
             elif kind == "corrupt":
                 damaged = []
                 for f in frames:
-                    if rng.random() < fault.rate:
-                        f = bytearray(f)
-                        for _ in range(fault.bits):
-                            bit = rng.randrange(len(f) * 8)
-                            f[bit >> 3] ^= 1 << (bit & 7)
-                        f = bytes(f)
+                    if rng.random() < fault.rate and len(f) > 1:
+                        f = _flip_bits(f, fault.bits, rng)
                         stats[f"{direction}_corrupted"] += 1
                     damaged.append(f)
                 frames = damaged
@@ -226,3 +241,19 @@ class LinkTap:
 
     def close(self) -> None:
         self.link.close()
+
+
+def _flip_bits(frame: bytes, bits: int, rng: random.Random) -> bytes:
+    """``bits`` distinct bit flips before the frame's delimiter, none leaving a 0x00 byte."""
+    out = bytearray(frame)
+    body_bits = (len(out) - 1) * 8          # the last byte is the 0x00 delimiter
+    flipped: set[int] = set()
+    attempts = 64 * bits                    # a frame always has far more valid bits than this
+    while len(flipped) < min(bits, body_bits) and attempts:
+        attempts -= 1
+        bit = rng.randrange(body_bits)
+        if bit in flipped or out[bit >> 3] ^ (1 << (bit & 7)) == 0:
+            continue
+        out[bit >> 3] ^= 1 << (bit & 7)
+        flipped.add(bit)
+    return bytes(out)

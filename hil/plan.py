@@ -71,6 +71,7 @@ _BOOL = {"type": "boolean"}
 _NAME = {"type": "string", "minLength": 1}
 _SENSORS = {"enum": ["adc_i1", "adc_i2", "adc_vdc"]}
 _COUNTS = {"type": "integer", "minimum": 0, "maximum": 4095}
+_DIRECTION = {"enum": ["out", "in", "both"]}   # link faults: bench -> board, board -> bench
 
 
 def _obj(props: dict, required: Iterable[str] = (), min_props: int = 0) -> dict:
@@ -108,14 +109,18 @@ FAULTS: dict[str, dict] = {
                           ["fraction"]),
     "dc_link_ripple": _obj({"amplitude_v": _POS, "frequency_hz": _POS},
                            ["amplitude_v", "frequency_hz"]),
-    "parameter_drift": _obj({"parameter": {"enum": list(PLANT_PARAMS)}, "factor": _POS,
-                             "ramp_s": _NONNEG}, ["parameter", "factor"]),
-    "link_drop": _obj({"rate": _FRACTION, "seed": {"type": "integer"}}, ["rate"]),
-    "link_corrupt": _obj({"rate": _FRACTION, "bits": _INT_POS, "seed": {"type": "integer"}}, ["rate"]),
-    "link_delay": _obj({"periods": _INT_POS}, ["periods"]),
-    "link_duplicate": _obj({"rate": _FRACTION, "seed": {"type": "integer"}}, ["rate"]),
-    "link_reorder": _obj({"rate": _FRACTION, "seed": {"type": "integer"}}, ["rate"]),
-    "link_unplug": _obj({}),
+    "parameter_drift": _obj({"parameter": {"enum": [*PLANT_PARAMS, "load_torque_nm"]},
+                             "factor": _POS, "ramp_s": _NONNEG}, ["parameter", "factor"]),
+    "link_drop": _obj({"rate": _FRACTION, "seed": {"type": "integer"}, "direction": _DIRECTION},
+                      ["rate"]),
+    "link_corrupt": _obj({"rate": _FRACTION, "bits": _INT_POS, "seed": {"type": "integer"},
+                          "direction": _DIRECTION}, ["rate"]),
+    "link_delay": _obj({"periods": _INT_POS, "direction": _DIRECTION}, ["periods"]),
+    "link_duplicate": _obj({"rate": _FRACTION, "seed": {"type": "integer"}, "direction": _DIRECTION},
+                           ["rate"]),
+    "link_reorder": _obj({"rate": _FRACTION, "seed": {"type": "integer"}, "direction": _DIRECTION},
+                         ["rate"]),
+    "link_unplug": _obj({"direction": _DIRECTION}),
 }
 for _schema in FAULTS.values():
     _schema["properties"].update(_FAULT_COMMON)

@@ -89,7 +89,9 @@ def run_realtime(session, count: int, stop: Callable[[], bool] | None = None,
     stats.setdefault("period_s", period_s)
     lateness = []
     late_answers = missing = misses = overruns = 0
-    answered_period = -1
+    # The newest period answered, kept across calls: the watchdog counts from it.
+    answered_period = getattr(session, "_rt_answered_period", plant.period - 1)
+    watchdog = cfg.watchdog_periods
     latest_gates = None
     clock = time.perf_counter_ns
     sleep = time.sleep
@@ -127,6 +129,16 @@ def run_realtime(session, count: int, stop: Callable[[], bool] | None = None,
             k = sample.period
             if k > 0 and answered_period < k - 1:
                 missing += 1
+                if k - 1 - answered_period >= watchdog:
+                    plant.safe_state()
+                    session._rt_answered_period = answered_period
+                    why = (f"the board process exited with status {session.conn.board_exit_status()}"
+                           if not session.conn.board_alive() else
+                           f"no GATES for {k - 1 - answered_period} consecutive periods")
+                    session.error = f"watchdog at period {k} (t = {k * session.period_s:.6f} s): {why}"
+                    session.event("watchdog", period=k, reason=why)
+                    _store(stats, lateness, period_s, late_answers, missing, overruns)
+                    raise SessionError(session.error)
             link.send(Sample(k, sample.adc_i1, sample.adc_i2, sample.adc_vdc, sample.encoder,
                              sample.status))
             recorder.period(k, plant.truth(), sample)
@@ -141,6 +153,7 @@ def run_realtime(session, count: int, stop: Callable[[], bool] | None = None,
                 raise SessionError(session.error)
             if stop is not None and stop():
                 break
+    session._rt_answered_period = answered_period
     _store(stats, lateness, period_s, late_answers, missing, overruns)
     return done
 

@@ -19,6 +19,9 @@ TELEMETRY_FIELDS = ("sector", "speed_source", "state", "gates", "speed_feedback_
                     "torque_ref_nm", "rotor_pos_conv_rad", "rotor_pos_ekf_rad")
 COMMAND_FIELDS = ("enable", "speed_source", "speed_ref_rpm", "torque_mode", "torque_ref_nm",
                   "flux_ref_wb")
+#: Step signals every run has (0 until they change): the board's latched fault code (FAULT,
+#: STATUS) and the Modbus bits of the injected faults in effect (hil/faults.py).
+STEP_SIGNALS = ("ctrl.fault_code", "fault.active_bits")
 
 
 def unit_of(field: str) -> str:
@@ -46,6 +49,9 @@ class Recorder:
         self.sensor_rows: list[tuple] = []
         self.telemetry_rows: list[tuple] = []
         self.command_rows: list[tuple] = []
+        # Step signals that change now and then (board fault code, injected faults):
+        # name -> [(period, value)], held until the next change.
+        self.step_rows: dict[str, list[tuple[int, float]]] = {name: [] for name in STEP_SIGNALS}
         self._log = None
         self._truth_ch = self._sensor_ch = self._telemetry_ch = None
         self._frames_ch = None
@@ -89,6 +95,10 @@ class Recorder:
             self._log.write_json("/cmd", round(k * self.period_s * 1e9),
                                  dict(zip(COMMAND_FIELDS, row), period=k))
 
+    def step_value(self, name: str, k: int, value: float) -> None:
+        """A step signal (``group.field``) takes ``value`` from period k on."""
+        self.step_rows.setdefault(name, []).append((k, float(value)))
+
     def frames(self, k: int, capture: dict[str, tuple[bytes, int]]) -> None:
         """Raw frames of the last batch of periods, one log message per direction."""
         if self._log is None:
@@ -124,6 +134,15 @@ class Recorder:
                     values = np.full(len(self.periods), np.nan)
                     values[valid] = cmd[idx[valid], i + 1]
                     out[f"cmd.{name}"] = (t, values, unit_of(name))
+            # Step signals on the period grid: 0 before their first change.
+            k = np.asarray(self.periods)
+            for name, rows in self.step_rows.items():
+                values = np.zeros(len(k))
+                if rows:
+                    at = np.asarray([r[0] for r in rows])
+                    idx = np.searchsorted(at, k, side="right") - 1
+                    values[idx >= 0] = np.asarray([r[1] for r in rows])[idx[idx >= 0]]
+                out[name] = (t, values, "")
         if self.telemetry_rows:
             tel = np.asarray(self.telemetry_rows, dtype=np.float64)
             t_tel = tel[:, 0] * self.period_s

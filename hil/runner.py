@@ -207,13 +207,15 @@ def _run(plan: Plan, opts: RunOptions) -> tuple[PlanResult, SignalSet]:
         session.on_period = stimuli
         session.start()
         if opts.modbus is not None:
+            from hil.faults import MODBUS_BIT_MASK
             from hil.modbus_port import ControlMailbox, ModbusPort
 
             mailbox = ControlMailbox(load_torque_nm=profile.load.torque_nm,
                                      dc_link_voltage_v=profile.dc_link.source_voltage_v)
             session.attach_mailbox(mailbox)
             port = ModbusPort(mailbox, host=opts.modbus[0], port=opts.modbus[1],
-                              isolation="process" if mode == "realtime" else "thread")
+                              isolation="process" if mode == "realtime" else "thread",
+                              fault_bits_mask=MODBUS_BIT_MASK)
             port.start()
         deadline = None if plan.timeout_s is None else wall0 + plan.timeout_s
         _execute(plan, session, stimuli, state, deadline, opts.progress)
@@ -260,6 +262,8 @@ def _run(plan: Plan, opts: RunOptions) -> tuple[PlanResult, SignalSet]:
         extra["link_counters"] = session.link_counters() if session.conn is not None else {}
         extra["board_faults"] = [{"code": f.code, "period": f.period, "value": f.value}
                                  for f in session.faults]
+        if session.fault_injector is not None:
+            extra["faults_injected"] = list(session.fault_injector.history)
         if session.rt_stats:
             extra["realtime"] = dict(session.rt_stats)
     result = PlanResult(
@@ -385,6 +389,13 @@ class Bench:
 
     def run(self, duration_s: float) -> None:
         self.session.run_periods(round(duration_s / self.session.period_s))
+
+    @property
+    def faults(self):
+        """The fault injector: ``bench.faults.inject("open_phase", phase="a")`` (hil/faults.py)."""
+        from hil.faults import injector
+
+        return injector(self.session)
 
     def signals(self) -> SignalSet:
         return SignalSet.from_arrays(self.session.recorder.arrays())

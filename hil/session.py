@@ -110,6 +110,7 @@ class BenchSession:
         # Modbus input registers are refreshed every 10 ms of simulated time.
         self.publish_every = max(1, round(0.01 / self.period_s))
         self.fault_bits = 0
+        self.fault_injector = None      # hil.faults.injector(session) creates it on first use
         self.tap: LinkTap | None = None
         self.rt_stats: dict[str, Any] = {}
 
@@ -247,8 +248,10 @@ class BenchSession:
             self.recorder.telemetry(msg)
         elif t is Fault:
             self.faults.append(msg)
+            self.recorder.step_value("ctrl.fault_code", msg.period, msg.code)
             self._event("board_fault", {"code": msg.code, "period": msg.period, "value": msg.value})
         elif t is Status:
+            self.recorder.step_value("ctrl.fault_code", msg.period, msg.fault_code)
             self._event("board_status", {"state": msg.state, "fault_code": msg.fault_code,
                                          "period": msg.period})
         elif t is Gates or t is Duty:
@@ -372,6 +375,7 @@ class BenchSession:
         f = _TRUTH_INDEX
         state = (StateBit.RUNNING if self.command_state.enable else 0) | \
             (StateBit.BOARD_FAULT if self.faults else 0) | \
+            (StateBit.FAULT_INJECTED if self.fault_bits else 0) | \
             (StateBit.REAL_TIME if self.config.mode == "realtime" else 0)
         mailbox.publish(PlantSnapshot(
             truth[f["speed_rpm"]], truth[f["i_a"]], truth[f["i_b"]], truth[f["i_c"]],
@@ -384,6 +388,8 @@ class BenchSession:
             return
         self._closed = True
         errors = []
+        if self.fault_injector is not None:
+            self.fault_injector.detach()    # faults stay as they are; nothing lifts them now
         try:
             self.plant.safe_state()
         except Exception as exc:  # noqa: BLE001

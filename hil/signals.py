@@ -32,6 +32,9 @@ _CTRL = {
 }
 _CMD = {"speed_ref_rpm": "rpm", "enable": "1", "speed_source": "1", "torque_mode": "1",
         "torque_ref_nm": "Nm", "flux_ref_wb": "Wb"}
+# Step signals (hil/recorder.py step_value): the board's latched fault code from FAULT and
+# STATUS (0 before any), and the Modbus bits of the injected faults in effect (hil/faults.py).
+_STEP = {"ctrl.fault_code": "1", "fault.active_bits": "1"}
 
 #: Every signal a plan may name, with its unit. Angles are wrapped to (-pi, pi].
 SIGNAL_CATALOG: dict[str, str] = {
@@ -39,6 +42,7 @@ SIGNAL_CATALOG: dict[str, str] = {
     **{f"sensor.{k}": v for k, v in _SENSOR.items()},
     **{f"ctrl.{k}": v for k, v in _CTRL.items()},
     **{f"cmd.{k}": v for k, v in _CMD.items()},
+    **_STEP,
 }
 
 

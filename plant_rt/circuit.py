@@ -24,6 +24,10 @@ a P/N current reaching zero (the phase becomes O), a floating terminal of an O p
 back-EMF overcoming the rails (the pair of diodes or switches that conducts first turns on).
 This is what makes the safe state at 3000 rpm decay to zero and then stay there while the line
 back-EMF is below the 70 V link.
+
+An open phase (a broken wire or connector between leg x and the motor, a fault) keeps phase x
+in O whatever its leg does: its terminal floats with no diode to catch it, so it has no turn-on
+event and takes no part in a release pair; the other two phases carry opposite currents.
 """
 from __future__ import annotations
 
@@ -65,6 +69,12 @@ class Network:
         self._legs: tuple[int, int, int] | None = None
         self.release_pair = (0, 1)
         self.te = 0.0
+        self.open_phase: int | None = None
+
+    def set_open_phase(self, phase: int | None) -> None:
+        """Phase 0, 1 or 2 disconnected from its leg (None: all connected)."""
+        self.open_phase = phase
+        self._legs = None
 
     def set_inverter(self, inverter: InverterParams) -> None:
         self.ud = inverter.device_drop_v
@@ -90,8 +100,11 @@ class Network:
         ia, ib, _, _ = self.motor.currents(y[0], y[1], y[3])
         cur = (ia, -0.5 * ia + S32 * ib, -0.5 * ia - S32 * ib)
         kinds = []
+        cut = self.open_phase
         for x in range(3):
-            if legs[x] != O:
+            if x == cut:
+                kinds.append(O)
+            elif legs[x] != O:
                 kinds.append(legs[x])
             elif self.kinds[x] in (P, N, O):
                 kinds.append(self.kinds[x])        # still open: its diode state carries on
@@ -112,9 +125,12 @@ class Network:
 
     def set_driven(self, legs: tuple[int, int, int]) -> None:
         """The fast path ran an all-driven interval: remember it for the next open leg."""
-        self.kinds = list(legs)
-        self.zero = []
-        self.all_zero = False
+        if self.open_phase is not None:
+            self._configure([O if x == self.open_phase else legs[x] for x in range(3)])
+        else:
+            self.kinds = list(legs)
+            self.zero = []
+            self.all_zero = False
         self._legs = None
 
     def _project(self, y: list[float]) -> None:
@@ -128,7 +144,15 @@ class Network:
             y[0] = m.psim * c
             y[1] = m.psim * s
             return
-        ex0, ex1 = PHASE_AXES[self.zero[0]]
+        self.project_phase(self.zero[0], y)
+
+    def project_phase(self, x: int, y: list[float]) -> None:
+        """Moves the flux along phase x's axis until i_x = 0 (the other currents keep their
+        difference)."""
+        m = self.motor
+        e = m.p * y[3]
+        c, s = cos(e), sin(e)
+        ex0, ex1 = PHASE_AXES[x]
         ia, ib, _, _ = m.currents(y[0], y[1], y[3])
         ix = ex0 * ia + ex1 * ib
         rd = c * ex0 + s * ex1
@@ -263,7 +287,10 @@ class Network:
                 lo.append(ex - rail)
         best = -math.inf
         pair = (0, 1)
+        cut = self.open_phase
         for x, y in ((0, 1), (0, 2), (1, 0), (1, 2), (2, 0), (2, 1)):
+            if x == cut or y == cut:
+                continue
             g = up[x] - lo[y]
             if g > best:
                 best, pair = g, (x, y)
@@ -283,7 +310,7 @@ class Network:
                 out.append((-cur[x], ("i", x)))
             elif kinds[x] == N:
                 out.append((cur[x], ("i", x)))
-        if self.zero:
+        if self.zero and self.zero[0] != self.open_phase:
             x = self.zero[0]
             out.append((self.vx - self.vdc - self.ud, ("hi", x)))
             out.append((-self.ud - self.vx, ("lo", x)))

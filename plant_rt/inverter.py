@@ -161,15 +161,26 @@ class SwitchTimeline:
     """Builds each period's constant-word intervals from the old and new command.
 
     Remembers, per switch, when its command last turned it on (relative to the current period
-    start) so that dead time spans period boundaries.
+    start) so that dead time spans period boundaries. ``force_on`` and ``force_off`` (gate
+    bits) are switches stuck on or off whatever they are told (a fault): applied to every
+    interval's word, after dead time, so a stuck-on switch meeting its commanded partner is a
+    shoot-through like any other.
     """
 
     def __init__(self, period_s: float, delay_s: float, dead_time_s: float):
         self.period_s = period_s
         self.delay_s = delay_s
         self.dead_time_s = dead_time_s
+        self.force_on = 0
+        self.force_off = 0
         # Per switch: time of the command's last rising edge (<= 0), or None while commanded off.
         self._rise: list[float | None] = [None] * 6
+
+    def _stuck(self, intervals: list[tuple[float, float, int]]) -> list[tuple[float, float, int]]:
+        on, keep = self.force_on, ~self.force_off
+        if not (on or self.force_off):
+            return intervals
+        return [(a, b, (word | on) & keep) for a, b, word in intervals]
 
     def reset(self, command: Command) -> None:
         """The command has held forever (e.g. safe state): no pending dead time."""
@@ -187,8 +198,8 @@ class SwitchTimeline:
         T = self.period_s
         if self.dead_time_s == 0.0 and (self.delay_s == 0.0 or old == new):
             if new.duty is None:
-                return [(0.0, T, new.gates)]
-            return self._duty_sweep(new.duty)
+                return self._stuck([(0.0, T, new.gates)])
+            return self._stuck(self._duty_sweep(new.duty))
         delay = min(self.delay_s, T)
         td = self.dead_time_s
         actual: list[list[tuple[float, float]]] = []
@@ -233,7 +244,7 @@ class SwitchTimeline:
                 if a < b:
                     switch_on.append((a, b))
             actual.append(switch_on)
-        return self._word_intervals(actual)
+        return self._stuck(self._word_intervals(actual))
 
     def _duty_sweep(self, duty: tuple[float, float, float]) -> list[tuple[float, float, int]]:
         """One centre-aligned period without dead time: legs switch at T (1 -+ d) / 2."""

@@ -11,6 +11,18 @@ time, load-profile knots) and each interval is integrated exactly as it is, neve
 with all legs driven, an ideal DC link and no device drop, by the motor's plain-float RK4
 (the fast path: one RK4 step per 50 us); otherwise by the general network with diode events
 (plant_rt.circuit).
+
+Fault hooks (hil/faults.py drives them; each costs nothing while it is off):
+
+    set_open_phase('a')            one motor phase disconnected: its current is exactly zero
+    set_gate_stuck('b_high', 'on') a switch stuck on or off whatever the board commands
+    set_dc_ripple(5.0, 300.0)      source voltage + A sin(2 pi f t)
+    ramp_dc_voltage(49.0, 0.01)    a sag or surge reached linearly
+    ramp_motor_param('resistance_ohm', 0.699, 0.1)   drift (winding or magnet temperature)
+    add_period_hook(fn, 'before' | 'after')          fn(k) around every step()
+
+Slowly varying quantities (ripple, ramps) are held constant over a period at their value at
+the period's midpoint: a zero-order hold at 20 kHz, exact for the integration of that period.
 """
 from __future__ import annotations
 
@@ -21,8 +33,8 @@ from math import cos, pi, sin
 from plant_rt.circuit import S32, ZERO_CURRENT_A, Network
 from plant_rt.dc_link import DcLink
 from plant_rt.inverter import (
-    GATE_COMMANDS, LEG_BITS, H, L, O, Command, InverterParams, SwitchTimeline, driven_vector,
-    leg_states, shoot_through,
+    GATE_COMMANDS, LEG_BITS, SQRT3, H, L, O, Command, InverterParams, SwitchTimeline,
+    driven_vector, leg_states, shoot_through,
 )
 from plant_rt.load import Load
 from plant_rt.motor import MotorModel
@@ -43,6 +55,15 @@ _LEG_STATES = tuple(leg_states(g) for g in range(64))
 #: (u_alpha, u_beta per volt of link, g_alpha, g_beta, leg states) per word, None if not driven.
 _UNIT_VECTORS = tuple(None if driven_vector(g, 1.0) is None
                       else driven_vector(g, 1.0) + (leg_states(g),) for g in range(64))
+_DRIVEN_WORDS = tuple((g, unit) for g, unit in enumerate(_UNIT_VECTORS) if unit is not None)
+PHASES = ("a", "b", "c")
+SWITCHES = ("a_high", "a_low", "b_high", "b_low", "c_high", "c_low")
+#: Names a test plan uses for motor constants (hil/plan.py PLANT_PARAMS) -> MotorParams fields.
+PARAM_ALIASES = {"inductance_h": ("inductance_d_h", "inductance_q_h"),
+                 "ld_h": ("inductance_d_h",), "lq_h": ("inductance_q_h",)}
+#: Drift ramps update the motor every this many seconds (a parameter change re-derives the
+#: plant's tables, about 16 us; thermal drifts take seconds).
+PARAM_RAMP_UPDATE_S = 1e-3
 
 
 def wrap_angle(x: float) -> float:
@@ -86,6 +107,13 @@ class Plant:
         self._sample: SensorSample | None = None
         self._load_seg = (0.0, 0.0, 0.0, math.inf)
         self._seg_key = None
+        self._open_phase: int | None = None
+        self._hooks: dict[str, list] = {"before": [], "after": []}
+        self._dc_base_v = self.dc_link.source_v
+        self._dc_ramp: tuple[float, float, float, float] | None = None   # t0, t1, v0, v1
+        self._ripple: tuple[float, float] | None = None                   # amplitude, Hz
+        self._param_ramps: dict[str, tuple[float, float, float, float, int]] = {}
+        self._vectors: list = [None] * 64
         self._rebuild()
 
     # --------------------------------------------------------------- helpers
@@ -106,7 +134,10 @@ class Plant:
         self._ir = 1.0 / m.r
         self._load_key = None           # re-read the load (and the damping) at the next step
         self._load_until = -math.inf
-        self._fast_ok = self.dc_link.ideal and self.inverter.device_drop_v == 0.0
+        self._fast_ok = (self.dc_link.ideal and self.inverter.device_drop_v == 0.0
+                         and self._open_phase is None)
+        # The whole period as one Table 2 vector needs the commanded word to be the real one.
+        self._direct = self._fast_ok and not (self._timeline.force_on or self._timeline.force_off)
         self._timeline.dead_time_s = self.inverter.dead_time_s
         # Every gate command is one interval: no dead time, and no delay that could split it.
         self._one_interval = (self.inverter.dead_time_s == 0.0
@@ -115,9 +146,9 @@ class Plant:
     def _scale_vectors(self) -> None:
         """Table 2 voltages of every driven gate word at the present source voltage."""
         vdc = self.dc_link.source_v
-        self._vectors = [None if unit is None else
-                         (unit[0] * vdc, unit[1] * vdc, unit[2], unit[3], unit[4])
-                         for unit in _UNIT_VECTORS]
+        vectors = self._vectors
+        for g, unit in _DRIVEN_WORDS:
+            vectors[g] = (unit[0] * vdc, unit[1] * vdc, unit[2], unit[3], unit[4])
         self.network.invalidate()
 
     def _load_segment(self, t: float) -> tuple[float, float, float]:
@@ -156,7 +187,7 @@ class Plant:
         self._flags = 0
         # Fast path: the whole period is one driven Table 2 vector (the paper's case).
         vec = self._vectors[new.gates] if new.duty is None else None
-        if vec is not None and self._fast_ok and (old is new or self._one_interval):
+        if vec is not None and self._direct and (old is new or self._one_interval):
             if self.load.version != self._load_key or t0 + T > self._load_until:
                 self._refresh_load(t0)
             if t0 + T <= self._load_until:
@@ -317,9 +348,21 @@ class Plant:
             i_d = (c * self._pa + s * self._pb - m.psim) * m.ild
             i_q = (c * self._pb - s * self._pa) * m.ilq
             ia, ib = c * i_d - s * i_q, s * i_d + c * i_q
+            if self._open_phase is not None:
+                ia, ib = _cut_phase(self._open_phase, ia, ib)[3:]
         self._sample = self.sensors.read(k, ia, ib, self._vdc, self._revs, th, self._flags)
         self._sample_k = k
         return self._sample
+
+    @property
+    def last_sample(self) -> SensorSample | None:
+        """The most recent sample() (None before the first)."""
+        return self._sample
+
+    def encoder_count(self) -> int:
+        """The encoder counter now, as the next sample would read it (no noise drawn)."""
+        enc = self.sensors.encoder
+        return enc.read(enc.position(self._revs, self._th))
 
     def truth(self) -> tuple[float, ...]:
         """The plant's true state at t_k, in the order of TRUTH_FIELDS."""
@@ -333,41 +376,229 @@ class Plant:
         te = m.torque(i_d, i_q)
         tl = te if self.load.locked else self.load.torque(t, w)
         T = self._T
+        if self._open_phase is not None and not self._zero_current:
+            i_ph_a, i_ph_b, i_ph_c, ia, ib = _cut_phase(self._open_phase, ia, ib)
+            return (t, i_ph_a, i_ph_b, i_ph_c, ia, ib, pa, pb,
+                    math.hypot(pa, pb), te, w, w * RPM_PER_RAD_S, wrap_angle(m.p * th), th,
+                    self._vdc, self._idc_int / T, tl, self._u_int[0] / T, self._u_int[1] / T)
         return (t, ia, -0.5 * ia + S32 * ib, -0.5 * ia - S32 * ib, ia, ib, pa, pb,
                 math.hypot(pa, pb), te, w, w * RPM_PER_RAD_S, wrap_angle(m.p * th), th,
                 self._vdc, self._idc_int / T, tl, self._u_int[0] / T, self._u_int[1] / T)
 
     # ------------------------------------------------------- runtime changes
+    @property
+    def dc_source_voltage_v(self) -> float:
+        """The source voltage set by set_dc_voltage or a ramp (without ripple)."""
+        return self._dc_base_v
+
     def set_dc_voltage(self, v: float) -> None:
-        """Source voltage (a sag or surge) from now on."""
-        v = float(v)
-        if not math.isfinite(v) or v < 0.0:
-            raise ValueError(f"DC source voltage must be a finite number >= 0, got {v!r}")
+        """Source voltage (a sag or surge) from now on; ends a ramp in progress."""
+        v = _finite_nonneg(v, "DC source voltage")
+        self._dc_ramp = None
+        self._dc_base_v = v
+        self._apply_source(v + self._ripple_at((self.period + 0.5) * self._T))
+        self._update_dc_hook()
+
+    def _apply_source(self, v: float) -> None:
+        v = max(v, 0.0)
         self.dc_link.source_v = v
         if self.dc_link.ideal:
             self._vdc = v
         self._scale_vectors()
 
+    def _ripple_at(self, t: float) -> float:
+        if self._ripple is None:
+            return 0.0
+        amplitude, hz = self._ripple
+        return amplitude * sin(TWO_PI * hz * t)
+
+    def ramp_dc_voltage(self, v: float, ramp_s: float) -> None:
+        """Source voltage reaches v linearly over ramp_s from now (0: at once), then holds."""
+        v = _finite_nonneg(v, "DC source voltage")
+        ramp_s = _finite_nonneg(ramp_s, "ramp_s")
+        if ramp_s < self._T:
+            self.set_dc_voltage(v)
+            return
+        t0 = self.period * self._T
+        self._dc_ramp = (t0, t0 + ramp_s, self._dc_base_v, v)
+        self._update_dc_hook()
+
+    def set_dc_ripple(self, amplitude_v: float, frequency_hz: float) -> None:
+        """Adds amplitude_v sin(2 pi f t) to the source voltage (amplitude 0 removes it); the
+        bus is clamped at 0 V."""
+        amplitude_v = _finite_nonneg(amplitude_v, "ripple amplitude_v")
+        frequency_hz = _finite_nonneg(frequency_hz, "ripple frequency_hz")
+        if amplitude_v and not frequency_hz < 0.5 / self._T:
+            raise ValueError(f"ripple frequency {frequency_hz:g} Hz is not below the Nyquist "
+                             f"frequency of the {self._T * 1e6:g} us period")
+        self._ripple = (amplitude_v, frequency_hz) if amplitude_v else None
+        if self._ripple is None:
+            self._apply_source(self._dc_base_v)
+        self._update_dc_hook()
+
+    def _update_dc_hook(self) -> None:
+        active = self._ripple is not None or self._dc_ramp is not None
+        if active and self._dc_hook not in self._hooks["before"]:
+            self.add_period_hook(self._dc_hook, "before")
+        elif not active and self._dc_hook in self._hooks["before"]:
+            self.remove_period_hook(self._dc_hook)
+
+    def _dc_hook(self, k: int) -> None:
+        t = (k + 0.5) * self._T
+        ramp = self._dc_ramp
+        if ramp is not None:
+            t0, t1, v0, v1 = ramp
+            if t >= t1:
+                self._dc_base_v = v1
+                self._dc_ramp = None
+                if self._ripple is None:
+                    self._apply_source(v1)
+                    self.remove_period_hook(self._dc_hook)
+                    return
+            else:
+                self._dc_base_v = v0 + (v1 - v0) * (t - t0) / (t1 - t0)
+        self._apply_source(self._dc_base_v + self._ripple_at(t))
+
+    def motor_param(self, name: str) -> float:
+        """A motor constant by MotorParams name or PARAM_ALIASES name."""
+        fields = PARAM_ALIASES.get(name, (name,))
+        try:
+            return float(getattr(self.motor.params, fields[0]))
+        except AttributeError:
+            raise ValueError(f"unknown motor parameter {name!r}") from None
+
     def set_motor_param(self, name: str, value: float) -> None:
         """Changes a motor constant while running (a hotter winding, a weaker magnet...).
 
-        The phase currents are continuous across the change (the flux linkage is recomputed).
+        ``name`` is a MotorParams field or a test plan's name (PARAM_ALIASES: inductance_h sets
+        both axes). The phase currents are continuous across the change (the flux linkage is
+        recomputed).
         """
         if name == "pole_pairs":
             raise ValueError("pole_pairs cannot change while the plant runs")
-        try:
-            value = coerce(type(self.motor.params), name, value)
-        except KeyError:
-            names = [f.name for f in dataclasses.fields(self.motor.params)
-                     if f.name != "pole_pairs"]
-            raise ValueError(f"unknown motor parameter {name!r} "
-                             f"(known: {', '.join(names)})") from None
-        except ValueError as exc:
-            raise ValueError(f"motor parameter {name}: {exc}") from None
+        changes = {}
+        for field_name in PARAM_ALIASES.get(name, (name,)):
+            try:
+                changes[field_name] = coerce(type(self.motor.params), field_name, value)
+            except KeyError:
+                names = [f.name for f in dataclasses.fields(self.motor.params)
+                         if f.name != "pole_pairs"] + list(PARAM_ALIASES)
+                raise ValueError(f"unknown motor parameter {name!r} "
+                                 f"(known: {', '.join(names)})") from None
+            except ValueError as exc:
+                raise ValueError(f"motor parameter {name}: {exc}") from None
         _, _, i_d, i_q = self.motor.currents(self._pa, self._pb, self._th)
-        self.motor.set_params(dataclasses.replace(self.motor.params, **{name: value}))
+        self.motor.set_params(dataclasses.replace(self.motor.params, **changes))
         self._pa, self._pb = self.motor.flux_from_currents(i_d, i_q, self._th)
         self._rebuild()
+
+    def ramp_motor_param(self, name: str, value: float, ramp_s: float) -> None:
+        """A motor constant drifts linearly to ``value`` over ramp_s from now (0: at once),
+        updated every PARAM_RAMP_UPDATE_S and exactly at the end. A new ramp of the same
+        parameter replaces the old one; set_motor_param does not end a ramp."""
+        start = self.motor_param(name)
+        ramp_s = _finite_nonneg(ramp_s, "ramp_s")
+        self._param_ramps.pop(name, None)
+        if ramp_s < self._T:
+            self.set_motor_param(name, value)
+        else:
+            self.set_motor_param(name, start)       # validates the name before the ramp runs
+            _finite_nonneg(value, name)
+            t0 = self.period * self._T
+            self._param_ramps[name] = (t0, t0 + ramp_s, start, float(value), self.period)
+        active = bool(self._param_ramps)
+        if active and self._param_hook not in self._hooks["before"]:
+            self.add_period_hook(self._param_hook, "before")
+        elif not active and self._param_hook in self._hooks["before"]:
+            self.remove_period_hook(self._param_hook)
+
+    def _param_hook(self, k: int) -> None:
+        t = (k + 0.5) * self._T
+        every = max(1, round(PARAM_RAMP_UPDATE_S / self._T))
+        for name, (t0, t1, v0, v1, due) in list(self._param_ramps.items()):
+            if t >= t1:
+                self.set_motor_param(name, v1)
+                del self._param_ramps[name]
+            elif k >= due:
+                self.set_motor_param(name, v0 + (v1 - v0) * (t - t0) / (t1 - t0))
+                self._param_ramps[name] = (t0, t1, v0, v1, k + every)
+        if not self._param_ramps:
+            self.remove_period_hook(self._param_hook)
+
+    @property
+    def open_phase(self) -> str | None:
+        return None if self._open_phase is None else PHASES[self._open_phase]
+
+    def set_open_phase(self, phase: str | None) -> None:
+        """Disconnects phase 'a', 'b' or 'c' from its inverter leg (None reconnects): its
+        current is forced to zero at once (the flux jumps to the constraint, as an arc that
+        quenches within a period would leave it)."""
+        if phase is not None and phase not in PHASES:
+            raise ValueError(f"phase must be one of a, b, c (or None), got {phase!r}")
+        self._open_phase = None if phase is None else PHASES.index(phase)
+        self.network.set_open_phase(self._open_phase)
+        if self._open_phase is not None and not self._zero_current:
+            # Onto i_x = 0 now, so that the next sample already reads it.
+            y = [self._pa, self._pb, self._w, self._th, self._vcap]
+            self.network.project_phase(self._open_phase, y)
+            self._pa, self._pb = y[0], y[1]
+        self._net_dirty = True
+        self._sample_k = -1
+        self._rebuild()
+
+    @property
+    def gates_stuck(self) -> dict[str, str]:
+        """Switch name -> 'on' | 'off' for every stuck switch."""
+        tl = self._timeline
+        out = {}
+        for j, name in enumerate(SWITCHES):
+            if tl.force_on & (1 << j):
+                out[name] = "on"
+            elif tl.force_off & (1 << j):
+                out[name] = "off"
+        return out
+
+    def set_gate_stuck(self, switch: str, state: str | None) -> None:
+        """Switch 'a_high' ... 'c_low' stuck 'on' or 'off' (None frees it), from now on."""
+        if switch not in SWITCHES:
+            raise ValueError(f"switch must be one of {', '.join(SWITCHES)}, got {switch!r}")
+        if state not in ("on", "off", None):
+            raise ValueError(f"state must be 'on', 'off' or None, got {state!r}")
+        bit = 1 << SWITCHES.index(switch)
+        tl = self._timeline
+        tl.force_on &= ~bit
+        tl.force_off &= ~bit
+        if state == "on":
+            tl.force_on |= bit
+        elif state == "off":
+            tl.force_off |= bit
+        self.network.invalidate()
+        self._rebuild()
+
+    # ------------------------------------------------------------- hooks
+    def add_period_hook(self, fn, when: str = "after") -> None:
+        """fn(k) is called at the start of every step() that integrates period k ('before'),
+        or after it with the new period k + 1 ('after'). Without hooks step() is the plain
+        method: an installed hook costs a call per period, none costs nothing."""
+        if when not in self._hooks:
+            raise ValueError(f"when must be 'before' or 'after', got {when!r}")
+        self._hooks[when].append(fn)
+        self.step = self._hooked_step       # the instance attribute shadows the method
+
+    def remove_period_hook(self, fn) -> None:
+        for hooks in self._hooks.values():
+            if fn in hooks:
+                hooks.remove(fn)
+        if not (self._hooks["before"] or self._hooks["after"]):
+            self.__dict__.pop("step", None)
+
+    def _hooked_step(self, gates: int | None = None, duty=None) -> None:
+        k = self.period
+        for fn in tuple(self._hooks["before"]):
+            fn(k)
+        Plant.step(self, gates, duty)
+        for fn in tuple(self._hooks["after"]):
+            fn(k + 1)
 
     def set_inverter_param(self, name: str, value: float) -> None:
         """Changes dead_time_s, device_drop_v or device_knee_a while running."""
@@ -390,3 +621,20 @@ class Plant:
         return {"psi_alpha": self._pa, "psi_beta": self._pb, "speed_rad_s": self._w,
                 "theta_m_rad": self._th, "revolutions": self._revs, "v_cap": self._vcap}
 
+
+
+def _cut_phase(x: int, i_alpha: float, i_beta: float) -> tuple[float, float, float, float, float]:
+    """Phase currents (a, b, c) and (alpha, beta) with phase x exactly zero and the other two
+    exactly opposite (the state satisfies this to rounding; the record states it exactly)."""
+    cur = [i_alpha, -0.5 * i_alpha + S32 * i_beta, -0.5 * i_alpha - S32 * i_beta]
+    y, z = (x + 1) % 3, (x + 2) % 3
+    d = 0.5 * (cur[y] - cur[z])
+    cur[x], cur[y], cur[z] = 0.0, d, -d
+    return cur[0], cur[1], cur[2], cur[0], (cur[0] + 2.0 * cur[1]) / SQRT3
+
+
+def _finite_nonneg(value: float, name: str) -> float:
+    v = float(value)
+    if not math.isfinite(v) or v < 0.0:
+        raise ValueError(f"{name} must be a finite number >= 0, got {value!r}")
+    return v

@@ -12,10 +12,18 @@ beta); count 0 and the index pulse at theta_m = 0.
 Noise is Gaussian in counts, one seeded stream per channel (numpy PCG64 drawn in blocks, so the
 per-sample cost is a list lookup and changing one channel's noise never shifts another's).
 Every channel attribute may be changed while the plant runs (fault injection).
+
+Faults (hil/faults.py switches them): an ADC channel may be stuck at a code or saturate inside a
+window [low, high] of codes narrower than the converter's; an encoder may be frozen, lose a
+fraction of its edges (the lost counts accumulate, as a real counter's would), jitter by a
+Gaussian number of counts (spurious edges that a quadrature decoder counts forward and back,
+so they do not accumulate), or lose its index pulse. A channel without any of these takes the
+plain path: one flag test, the same cost as before faults existed.
 """
 from __future__ import annotations
 
 import math
+import random
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
@@ -99,8 +107,8 @@ class AdcChannel:
     (None or a code) a frozen converter. Every attribute may be set while running."""
 
     __slots__ = ("_units_per_count", "_offset_counts", "_bits", "_gain", "_offset",
-                 "noise_rms_counts", "stuck_counts", "_noise", "_buf", "_i", "_base", "_scale",
-                 "_top")
+                 "noise_rms_counts", "_stuck", "_window", "_plain", "_noise", "_buf", "_i",
+                 "_base", "_scale", "_top", "_extra")
 
     def __init__(self, units_per_count: float, offset_counts: float, bits: int, gain: float,
                  noise_rms_counts: float, noise: GaussianNoise):
@@ -110,7 +118,10 @@ class AdcChannel:
         self._gain = gain
         self._offset = 0.0
         self.noise_rms_counts = noise_rms_counts
-        self.stuck_counts: int | None = None
+        self._stuck: int | None = None
+        self._window: tuple[int, int] | None = None   # saturation codes (low, high)
+        self._plain = True
+        self._extra: tuple | None = None    # what set_extra_noise replaced
         self._noise = noise
         self._buf: list[float] = []
         self._i = 0
@@ -142,6 +153,65 @@ class AdcChannel:
     def max_code(self) -> int:
         return self._top
 
+    @property
+    def stuck_counts(self) -> int | None:
+        """None, or the code a frozen converter returns whatever its input."""
+        return self._stuck
+
+    @stuck_counts.setter
+    def stuck_counts(self, code: int | None) -> None:
+        self._stuck = None if code is None else int(code)
+        self._plain = self._stuck is None and self._window is None
+
+    @property
+    def saturation(self) -> tuple[int, int] | None:
+        """None, or (low, high): codes clamped to this window (a transducer or amplifier that
+        saturates before the converter does)."""
+        return self._window
+
+    @saturation.setter
+    def saturation(self, window: tuple[int, int] | None) -> None:
+        if window is not None:
+            low, high = int(window[0]), int(window[1])
+            if not 0 <= low <= high <= self._top:
+                raise ValueError(f"saturation window must satisfy 0 <= low <= high <= "
+                                 f"{self._top}, got ({low}, {high})")
+            window = (low, high)
+        self._window = window
+        self._plain = self._stuck is None and self._window is None
+
+    def set_extra_noise(self, std_counts: float, seed: int | None = None) -> None:
+        """Adds Gaussian noise of std_counts rms (in quadrature with the channel's own). With a
+        seed it comes from a stream of its own; the channel's stream resumes where it was once
+        clear_extra_noise() lifts it."""
+        std_counts = float(std_counts)
+        if not std_counts >= 0.0 or not math.isfinite(std_counts):
+            raise ValueError(f"extra noise must be a finite number >= 0, got {std_counts!r}")
+        if self._extra is None:
+            self._extra = (self.noise_rms_counts, self._noise, self._buf, self._i, seed is not None)
+        base = self._extra[0]
+        self.noise_rms_counts = math.hypot(base, std_counts)
+        if seed is not None:
+            self._extra = self._extra[:4] + (True,)
+            self._noise = GaussianNoise(seed, 8)
+            self._buf, self._i = [], 0
+
+    def clear_extra_noise(self) -> None:
+        if self._extra is None:
+            return
+        rms, noise, buf, i, swapped = self._extra
+        self.noise_rms_counts = rms
+        if swapped:
+            self._noise, self._buf, self._i = noise, buf, i
+        self._extra = None
+
+    def _faulty(self, x: float) -> int:
+        if self._stuck is not None:
+            return self._stuck
+        code = int(x + 0.5)
+        low, high = self._window
+        return low if code < low else high if code > high else code
+
     def convert(self, value: float) -> int:
         """The code for a physical value (consumes one noise draw when noise is on)."""
         return _code(self, value)
@@ -162,8 +232,8 @@ def _code(ch: AdcChannel, value: float) -> int:
             i = 0
         x += sd * buf[i]
         ch._i = i + 1
-    if ch.stuck_counts is not None:
-        return ch.stuck_counts
+    if not ch._plain:
+        return ch._faulty(x)
     # int() truncates towards zero; negative codes are clamped to 0 anyway.
     code = int(x + 0.5)
     top = ch._top
@@ -171,16 +241,99 @@ def _code(ch: AdcChannel, value: float) -> int:
 
 
 class Encoder:
-    """Incremental encoder counter. `stuck_counts` freezes it, `invert` reverses the direction."""
+    """Incremental encoder counter. `stuck_counts` freezes it, `invert` reverses the direction;
+    `set_missing_counts`, `set_noise` and `index_missing` are faults (module docstring)."""
 
-    __slots__ = ("counts_per_rev", "counter_bits", "offset_counts", "stuck_counts", "invert")
+    __slots__ = ("counts_per_rev", "counter_bits", "_offset", "_stuck", "_invert", "_plain",
+                 "_missing_fraction", "_missing_rng", "_lost", "_last_position", "_noise_sd",
+                 "_noise", "_noise_buf", "_noise_i", "_index_missing")
 
     def __init__(self, params: EncoderParams):
         self.counts_per_rev = 4 * params.lines_per_rev
         self.counter_bits = params.counter_bits
-        self.offset_counts = params.offset_counts
-        self.stuck_counts: int | None = None
-        self.invert = False
+        self._offset = params.offset_counts
+        self._stuck: int | None = None
+        self._invert = False
+        self._missing_fraction = 0.0
+        self._missing_rng: random.Random | None = None
+        self._lost = 0
+        self._last_position: int | None = None
+        self._noise_sd = 0.0
+        self._noise: GaussianNoise | None = None
+        self._noise_buf: list[float] = []
+        self._noise_i = 0
+        self._index_missing = False
+        self._plain = True
+
+    def _update(self) -> None:
+        self._plain = (self._stuck is None and not self._invert and not self._missing_fraction
+                       and not self._lost and not self._noise_sd and not self._index_missing)
+
+    @property
+    def offset_counts(self) -> int:
+        return self._offset
+
+    @offset_counts.setter
+    def offset_counts(self, value: int) -> None:
+        self._offset = int(value)
+
+    @property
+    def stuck_counts(self) -> int | None:
+        return self._stuck
+
+    @stuck_counts.setter
+    def stuck_counts(self, value: int | None) -> None:
+        self._stuck = None if value is None else int(value)
+        self._update()
+
+    @property
+    def invert(self) -> bool:
+        return self._invert
+
+    @invert.setter
+    def invert(self, value: bool) -> None:
+        self._invert = bool(value)
+        self._update()
+
+    @property
+    def index_missing(self) -> bool:
+        """True: the index pulse never reaches the board (SAMPLE status bit INDEX_PULSE)."""
+        return self._index_missing
+
+    @index_missing.setter
+    def index_missing(self, value: bool) -> None:
+        self._index_missing = bool(value)
+        self._update()
+
+    @property
+    def lost_counts(self) -> int:
+        """Edges lost so far by the missing-counts fault (signed: in the direction of motion)."""
+        return self._lost
+
+    def set_missing_counts(self, fraction: float, seed: int = 0) -> None:
+        """Each edge is lost with probability ``fraction`` (0 lifts it; the counts already lost
+        stay lost, as in a real counter, until `reset_lost_counts`)."""
+        fraction = float(fraction)
+        if not 0.0 <= fraction <= 1.0:
+            raise ValueError(f"missing-counts fraction must be in [0, 1], got {fraction}")
+        self._missing_fraction = fraction
+        self._missing_rng = random.Random(f"encoder-missing:{seed}") if fraction else None
+        self._last_position = None
+        self._update()
+
+    def reset_lost_counts(self) -> None:
+        self._lost = 0
+        self._update()
+
+    def set_noise(self, std_counts: float, seed: int = 0) -> None:
+        """Gaussian jitter of ``std_counts`` rms, rounded to whole counts (0 lifts it)."""
+        std_counts = float(std_counts)
+        if not std_counts >= 0.0:
+            raise ValueError(f"encoder noise must be >= 0 counts rms, got {std_counts}")
+        self._noise_sd = std_counts
+        self._noise = GaussianNoise(seed, 4) if std_counts else None
+        self._noise_buf, self._noise_i = [], 0
+        self._update()
 
     def position(self, revs: int, theta_m: float) -> int:
         """Unwrapped count of the angle revs * 2 pi + theta_m."""
@@ -188,10 +341,33 @@ class Encoder:
         return revs * cpr + math.floor(theta_m * cpr * _INV_2PI)
 
     def read(self, position: int) -> int:
-        if self.stuck_counts is not None:
-            return self.stuck_counts
-        value = (-position if self.invert else position) + self.offset_counts
-        return value & ((1 << self.counter_bits) - 1)
+        if self._plain:
+            return (position + self._offset) & ((1 << self.counter_bits) - 1)
+        return self._faulty(position)
+
+    def _faulty(self, position: int) -> int:
+        """The counter with the active faults (one call per sample)."""
+        if self._stuck is not None:
+            return self._stuck
+        f = self._missing_fraction
+        if f:
+            last = self._last_position
+            if last is not None and position != last:
+                edges = position - last
+                rnd = self._missing_rng.random
+                lost = sum(1 for _ in range(abs(edges)) if rnd() < f)
+                self._lost += lost if edges > 0 else -lost
+            self._last_position = position
+        position -= self._lost
+        if self._noise_sd:
+            i = self._noise_i
+            if i >= len(self._noise_buf):
+                self._noise_buf, i = self._noise.block(), 0
+            position += int(round(self._noise_sd * self._noise_buf[i]))
+            self._noise_i = i + 1
+        if self._invert:
+            position = -position
+        return (position + self._offset) & ((1 << self.counter_bits) - 1)
 
 
 class Sensors:
@@ -240,12 +416,12 @@ class Sensors:
         c2 = _code(self.i2, i_b if y == 1 else i_c)
         c3 = _code(self.vdc, v_dc)
         enc = self.encoder
-        if enc.stuck_counts is not None:
-            count = enc.stuck_counts
+        cpr = enc.counts_per_rev
+        position = revs * cpr + _floor(theta_m * cpr * _INV_2PI)
+        if enc._plain:
+            count = (position + enc._offset) & ((1 << enc.counter_bits) - 1)
         else:
-            cpr = enc.counts_per_rev
-            position = revs * cpr + _floor(theta_m * cpr * _INV_2PI)
-            if enc.invert:
-                position = -position
-            count = (position + enc.offset_counts) & ((1 << enc.counter_bits) - 1)
+            count = enc._faulty(position)
+            if enc._index_missing:
+                status &= ~STATUS_INDEX_PULSE
         return _new_sample(SensorSample, (period, c1, c2, c3, count, status))
