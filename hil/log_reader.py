@@ -127,8 +127,16 @@ def _err(path: Path, msg: str) -> LogFileError:
     return LogFileError(f"{path}: {msg}")
 
 
+class _DamagedRecord(ValueError):
+    """A finished record whose body does not parse; _File turns it into a LogFileError."""
+
+
 def _record(cls, body: bytes) -> Any:
-    return cls.read(ReadDataStream(BytesIO(body)))
+    try:
+        return cls.read(ReadDataStream(BytesIO(body)))
+    except Exception as exc:  # noqa: BLE001 - mcap raises EndOfFile, struct.error, UnicodeDecodeError...
+        raise _DamagedRecord(f"corrupted: a {cls.__name__} record does not parse "
+                             f"({type(exc).__name__}: {exc})") from None
 
 
 class _File:
@@ -146,6 +154,9 @@ class _File:
             raise _err(self.path, "is a directory, not an MCAP log") from None
         try:
             self.scan = self._index_pass()
+        except _DamagedRecord as exc:
+            self.buf.close()
+            raise _err(self.path, str(exc)) from None
         except BaseException:
             self.buf.close()
             raise
@@ -153,8 +164,10 @@ class _File:
     def __enter__(self) -> _File:
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, exc_type, exc, tb) -> None:
         self.buf.close()
+        if isinstance(exc, _DamagedRecord):
+            raise _err(self.path, str(exc)) from None
 
     def _index_pass(self) -> _Scan:
         buf, path = self.buf, self.path

@@ -27,6 +27,7 @@ def parse_host_port(text: str, default_host: str = "127.0.0.1") -> tuple[str, in
 
 
 def serve_command(args) -> int:
+    from hil.faults import MODBUS_BIT_MASK
     from hil.modbus_port import ControlMailbox, ModbusPort
 
     profile = load_profile(args.profile)
@@ -38,7 +39,7 @@ def serve_command(args) -> int:
         host, number = parse_host_port(args.modbus)
         # A Modbus request holds the interpreter for 0.1-0.3 ms: in real time the port
         # runs in its own process so that it cannot stall a period.
-        port = ModbusPort(mailbox, host=host, port=number,
+        port = ModbusPort(mailbox, host=host, port=number, fault_bits_mask=MODBUS_BIT_MASK,
                           isolation="process" if args.mode == "realtime" else "thread")
     chunk = max(1, round(0.01 / profile.control_period_s))  # 10 ms of simulated time
     total = None if args.duration is None else round(args.duration / profile.control_period_s)

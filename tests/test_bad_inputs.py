@@ -273,9 +273,6 @@ def test_bit_rot_in_a_chunk_given_to_hil_log(run_log, tmp_path, capsys):
     assert str(bad) in err and "corrupted chunk at byte" in err
 
 
-@pytest.mark.xfail(strict=True, raises=Exception,
-                   reason="hil/log_reader.py _record() lets mcap's EndOfFile escape when a record "
-                          "inside the file is damaged (reported to the lead)")
 def test_damaged_channel_record_given_to_hil_log(run_log, tmp_path, capsys):
     data = bytearray(run_log.read_bytes())
     channel = next(body for _, op, body, _ in _records(data) if op == 0x04)
