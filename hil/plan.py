@@ -27,19 +27,13 @@ from hil.checks import CHECK_KINDS, STATISTICS, ArgSpec, CheckKind, result_unit
 from hil.limits import Limits
 from hil.signals import SIGNAL_CATALOG
 from hil.units import Quantity, UnitError, canonical, compatible, unit as lookup_unit
+from plant_rt.profile import CONTROLLER_PARAMS, READ_ONLY_PARAMS
 from hil.yaml_source import ConfigError, KeyPath, YamlDocument, load_yaml, parse_yaml
 
 # Board parameters a plan may PARAM_SET: protocol/c/hil_proto.h's hil_param_id
 # names, lower case without the HIL_PARAM_ prefix (control_step_cycles is read-only).
-BOARD_PARAMS: tuple[str, ...] = (
-    "control_period_s", "current_a_per_count", "current_offset_counts", "vdc_v_per_count",
-    "vdc_offset_counts", "encoder_counts_per_rev", "current_phases", "pole_pairs",
-    "stator_resistance_ohm", "stator_inductance_h", "magnet_flux_wb", "flux_ref_wb",
-    "flux_band_wb", "torque_band_nm", "torque_limit_nm", "speed_kp_nm_per_rad_s",
-    "speed_ki_nm_per_rad", "speed_lpf_cutoff_hz", "ekf_k1", "ekf_k2", "ekf_k3",
-    "flux_drift_cutoff_hz", "telemetry_divider", "overcurrent_a", "encoder_loss_timeout_s",
-)
-READ_ONLY_BOARD_PARAMS: tuple[str, ...] = ("control_step_cycles",)
+BOARD_PARAMS: tuple[str, ...] = tuple(p for p in CONTROLLER_PARAMS if p not in READ_ONLY_PARAMS)
+READ_ONLY_BOARD_PARAMS: tuple[str, ...] = READ_ONLY_PARAMS
 
 # Plant parameters a plan may change while running (a hotter winding, a warmer magnet).
 PLANT_PARAMS: dict[str, str] = {

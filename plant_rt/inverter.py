@@ -26,12 +26,8 @@ from dataclasses import dataclass
 
 from plant_rt.spec import param
 
-GATE_A_HIGH = 0x01
-GATE_A_LOW = 0x02
-GATE_B_HIGH = 0x04
-GATE_B_LOW = 0x08
-GATE_C_HIGH = 0x10
-GATE_C_LOW = 0x20
+from protocol.messages import GATE_A_HIGH, GATE_A_LOW, GATE_B_HIGH, GATE_B_LOW, GATE_C_HIGH, GATE_C_LOW
+
 LEG_BITS = ((GATE_A_HIGH, GATE_A_LOW), (GATE_B_HIGH, GATE_B_LOW), (GATE_C_HIGH, GATE_C_LOW))
 
 #: Table 2 switching states (s_a s_b s_c), 1 = high side on, as gate words.

@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from hil.yaml_source import ConfigError, YamlDocument, format_key, load_yaml
+from protocol.messages import ParamId
 
 from plant_rt.dc_link import DcLinkParams
 from plant_rt.inverter import InverterParams
@@ -29,16 +30,8 @@ from plant_rt.spec import coerce, param, to_float
 
 #: Controller parameters the bench may push with PARAM_SET: the hil_param_id names of
 #: protocol/c/hil_proto.h, lower case, without the HIL_PARAM_ prefix.
-CONTROLLER_PARAMS = (
-    "control_period_s", "current_a_per_count", "current_offset_counts", "vdc_v_per_count",
-    "vdc_offset_counts", "encoder_counts_per_rev", "current_phases", "pole_pairs",
-    "stator_resistance_ohm", "stator_inductance_h", "magnet_flux_wb", "flux_ref_wb",
-    "flux_band_wb", "torque_band_nm", "torque_limit_nm", "speed_kp_nm_per_rad_s",
-    "speed_ki_nm_per_rad", "speed_lpf_cutoff_hz", "ekf_k1", "ekf_k2", "ekf_k3",
-    "flux_drift_cutoff_hz", "telemetry_divider", "overcurrent_a", "encoder_loss_timeout_s",
-    "control_step_cycles",
-)
-READ_ONLY_PARAMS = ("control_step_cycles",)
+CONTROLLER_PARAMS = tuple(p.name.lower() for p in ParamId)
+READ_ONLY_PARAMS = (ParamId.CONTROL_STEP_CYCLES.name.lower(),)
 
 
 @dataclass(frozen=True)
