@@ -77,7 +77,7 @@ def run(quick: bool = False) -> dict:
     out["realtime_50us"] = realtime_hold(50e-6, 1.0 if quick else 2.0)
     ladder = []
     best = None
-    for period_us in (1000, 500, 250, 200, 100):
+    for period_us in (5000, 2000, 1000, 500, 250, 100):
         stats = realtime_hold(period_us * 1e-6, hold_s)
         ladder.append(stats)
         if stats.get("deadline_misses", 1) == 0:
