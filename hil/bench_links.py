@@ -125,7 +125,8 @@ def connect(spec: str) -> BoardConnection:
         except Exception:
             board.__exit__(None, None, None)
             raise
-        conn = BoardConnection(spec, link, hello_timeout_s=10.0, answer_timeout_s=2.0)
+        conn = BoardConnection(spec, link, hello_timeout_s=10.0, answer_timeout_s=2.0,
+                               process=board.process)
         conn._cleanups.append(lambda: board.__exit__(None, None, None))
         return conn
     if spec.startswith("serial:") or spec.startswith("can:"):

@@ -347,15 +347,17 @@ def rotating_samples(count: int, electrical_hz: float = 50.0, period_s: float = 
                      2900, int(electrical_hz * k * period_s * 4096) & 0xFFFF, 0)
 
 
-def measure_control_step(samples: int = 400, icount_shift: int = ICOUNT_SHIFT) -> dict:
+def measure_control_step(samples: int = 400, icount_shift: int = ICOUNT_SHIFT,
+                         telemetry_divider: int = 10) -> dict:
     """Cycles of ctl_step on the target (instructions under QEMU icount), as the firmware
     itself reports them through HIL_PARAM_CONTROL_STEP_CYCLES after every SAMPLE, for each
-    speed source; the first step (cold state) is left out of the statistics."""
+    speed source, split into the steps that also fill a TELEMETRY (every
+    telemetry_divider-th) and those that do not. The first step (cold state) is left out."""
     import statistics
 
     from protocol.links import open_link
     from protocol.messages import (CMD_ENABLE, PROTOCOL_VERSION, Command, Gates, Hello, ParamGet, ParamId,
-                                   ParamValue, Role, SpeedSource, Status)
+                                   ParamSet, ParamValue, Role, SpeedSource)
 
     def exchange(link, msg, answer_type):
         link.send(msg)
@@ -366,20 +368,27 @@ def measure_control_step(samples: int = 400, icount_shift: int = ICOUNT_SHIFT) -
             if isinstance(reply, answer_type):
                 return reply
 
-    result: dict = {"icount_shift": icount_shift, "samples": samples, "modes": {}}
+    def stats(values: list[int]) -> dict:
+        return {"median": int(statistics.median(values)), "min": min(values), "max": max(values),
+                "steps": len(values)}
+
+    result: dict = {"icount_shift": icount_shift, "telemetry_divider": telemetry_divider, "modes": {}}
     with QemuBoard(icount_shift=icount_shift) as board, open_link(board.link_url) as link:
         result["hello_name"] = exchange(link, Hello(PROTOCOL_VERSION, Role.BENCH, 0, 50_000, name=b"measure"),
                                         Hello).name_str
+        exchange(link, ParamSet(ParamId.TELEMETRY_DIVIDER, float(telemetry_divider)), ParamValue)
         for source in SpeedSource:
-            exchange(link, Command(CMD_ENABLE, source, 100.0, 0.0, 0.0), Status)
-            cycles = []
+            # STATUS answers only a change of state: do not wait for one when switching source
+            link.send(Command(CMD_ENABLE, source, 100.0, 0.0, 0.0))
+            plain, with_telemetry = [], []
             for sample in rotating_samples(samples):
                 exchange(link, sample, Gates)
-                value = exchange(link, ParamGet(ParamId.CONTROL_STEP_CYCLES), ParamValue)
-                cycles.append(int(value.value))
-            steady = cycles[1:]
-            result["modes"][source.name.lower()] = {
-                "min": min(steady), "median": int(statistics.median(steady)), "max": max(steady)}
+                cycles = int(exchange(link, ParamGet(ParamId.CONTROL_STEP_CYCLES), ParamValue).value)
+                if sample.period == 0:
+                    continue
+                (with_telemetry if sample.period % telemetry_divider == 0 else plain).append(cycles)
+            result["modes"][source.name.lower()] = {"step": stats(plain),
+                                                    "step_with_telemetry": stats(with_telemetry)}
     result.update(firmware_size(FIRMWARE_ELF))
     return result
 
@@ -388,9 +397,11 @@ def main() -> None:
     """python -m hil.qemu_board: prints the on-target step cost and the firmware size."""
     r = measure_control_step()
     print(f"firmware: {r['hello_name']} (QEMU mps2-an386, -icount shift={r['icount_shift']})")
+    print("instructions per ctl_step, median (min-max) over 399 steps:")
     for mode, c in r["modes"].items():
-        print(f"ctl_step, speed source {mode:12s}: {c['median']} instructions "
-              f"(min {c['min']}, max {c['max']}) over {r['samples'] - 1} steps")
+        a, b = c["step"], c["step_with_telemetry"]
+        print(f"  speed source {mode:12s}: {a['median']} ({a['min']}-{a['max']}); "
+              f"with TELEMETRY (1 in {r['telemetry_divider']}): {b['median']} ({b['min']}-{b['max']})")
     print(f"flash {r['flash_bytes']} B (text {r['text_bytes']}, data {r['data_bytes']}), "
           f"static RAM {r['static_ram_bytes']} B (data + bss)")
 
