@@ -11,7 +11,7 @@ from bench.stub import STUB, instructions_per_step
 
 pytestmark = pytest.mark.skipif(shutil.which("valgrind") is None, reason="needs valgrind")
 
-# measured 360 / 436 (EKF, gcc 12 -O2 with LTO); the bounds leave room for compiler
+# measured 351 / 427 (EKF, gcc 12 -O2 with LTO); the bounds leave room for compiler
 # versions, not for a new trigonometric call or a lost inlining
 BOUND_WITHOUT_TELEMETRY = 390
 BOUND_WITH_TELEMETRY = 470

@@ -255,7 +255,7 @@ uint8_t ctl_step(ctl *c, const hil_sample *s, hil_telemetry *tm)
             }
             uint8_t flux_up = hyst_step(&k->flux_hyst, &st->flux_hyst, c->flux_ref_wb, mag);
             uint8_t torque_up = hyst_step(&k->torque_hyst, &st->torque_hyst, torque_ref, torque);
-            sector = swtab_sector(pa, pb);
+            sector = swtab_sector_of_angle(theta_s);
             vector = k->vector_of[sector][(flux_up ? 0u : 2u) + (torque_up ? 0u : 1u)]; /* Table 3 */
         }
     }

@@ -38,6 +38,7 @@ typedef struct {
     /* derived by fluxobs_derive() */
     float magnet_flux_sq_wb2;    /* psi_f^2 */
     float drift_gain_per_step;   /* T gamma / 2 = T w0 / psi_f^2, 1/Wb^2 */
+    float half_r_t_ohm_s;        /* T R / 2: the trapezoidal R i term, Ohm s */
 } fluxobs_cfg;
 
 typedef struct {

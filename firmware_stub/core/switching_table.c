@@ -27,6 +27,19 @@ uint8_t swtab_sector(float psi_alpha, float psi_beta)
     return sector_of_code[code];
 }
 
+/* n = floor((theta + pi/6) / (pi/3)) + 6 lies in 3..9 for theta in [-pi, pi]
+ * (9 only at exactly pi: sector IV, as at -pi); sector = (n mod 6) + 1.
+ * Angles out of range clamp to 0..9 and NaN to 0, so the read stays inside. */
+static const uint8_t sector_of_sixth[10] = {1u, 2u, 3u, 4u, 5u, 6u, 1u, 2u, 3u, 4u};
+
+uint8_t swtab_sector_of_angle(float theta_rad)
+{
+    float sixths = theta_rad * (3.0f / FM_PI) + 6.5f;
+    sixths = sixths >= 0.0f ? sixths : 0.0f;
+    sixths = sixths <= 9.0f ? sixths : 9.0f;
+    return sector_of_sixth[(uint32_t)sixths];
+}
+
 uint8_t swtab_vector(uint8_t sector, uint8_t flux_up, uint8_t torque_up)
 {
     unsigned column = (flux_up ? 0u : 2u) + (torque_up ? 0u : 1u);

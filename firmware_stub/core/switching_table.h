@@ -24,6 +24,11 @@ extern const uint8_t swtab_table3[6][4];
 /* Sector 1..6 of the vector (psi_alpha, psi_beta). */
 uint8_t swtab_sector(float psi_alpha, float psi_beta);
 
+/* Sector 1..6 of a flux angle in [-pi, pi] (the paper's definition: sector k
+ * spans (2k - 3) pi/6 .. (2k - 1) pi/6). The control step has the angle anyway
+ * (eq. (10)), so this costs a multiply, an add and a table read; it agrees with
+ * swtab_sector() except within the angle's error of a sector boundary. */
+uint8_t swtab_sector_of_angle(float theta_rad);
 /* Voltage vector 1..6 for a sector 1..6 and the comparator outputs (0 or 1). */
 uint8_t swtab_vector(uint8_t sector, uint8_t flux_up, uint8_t torque_up);
 

@@ -7,7 +7,7 @@ static const double R = 0.466, LS = 4.8e-3, PSI_F = 0.0928;
 
 static fluxobs_cfg make_cfg(float cutoff_hz)
 {
-    fluxobs_cfg cfg = {(float)R, (float)LS, (float)PSI_F, T, cutoff_hz, 0.0f, 0.0f};
+    fluxobs_cfg cfg = {(float)R, (float)LS, (float)PSI_F, T, cutoff_hz, 0.0f, 0.0f, 0.0f};
     fluxobs_derive(&cfg);
     return cfg;
 }
