@@ -25,6 +25,7 @@ def lockstep_rate(link: str, log: bool, periods: int, batches: int) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         log_path = Path(tmp) / "bench.mcap" if log else None
         with BenchSession(profile, SessionConfig(link=link, log_path=log_path)) as session:
+            hold = session.cpu_latency.status
             session.send_command(enable=True, speed_source="ekf", speed_ref_rpm=3000)
             session.run_periods(periods // 4)  # warm-up
             rates = []
@@ -34,7 +35,46 @@ def lockstep_rate(link: str, log: bool, periods: int, batches: int) -> dict:
                 rates.append(periods / (time.perf_counter() - t0))
     rate = statistics.median(rates)
     return {"periods_per_s": round(rate), "us_per_period": round(1e6 / rate, 2),
-            "real_time_factor_at_50us": round(rate * profile.control_period_s, 3)}
+            "real_time_factor_at_50us": round(rate * profile.control_period_s, 3),
+            "cpu_dma_latency": hold}
+
+
+def stub_pty_vs_bare(hold_cpu_latency: bool, periods: int, batches: int) -> dict:
+    """stub-pty lockstep periods against raw round trips of the C echo over another pty.
+
+    Batches alternate (echo, session, echo, ...) so both see the same machine load and the
+    same CPU-latency hold: the session takes it when ``hold_cpu_latency`` (the default of
+    every session), and the echo batches run inside it.
+    """
+    from bench.protocol import SAMPLE, _make, _raw_batch, _spawn_echo
+    from protocol.codec import FrameEncoder
+
+    _make("build/hil_echo")
+    frame = FrameEncoder().encode(SAMPLE)
+    echo_proc, echo_link = _spawn_echo(raw=True)
+    config = SessionConfig(link="stub-pty", hold_cpu_latency=hold_cpu_latency)
+    bare_us, pty_us = [], []
+    try:
+        with BenchSession(load_profile(), config) as session:
+            session.send_command(enable=True, speed_source="ekf", speed_ref_rpm=3000)
+            session.run_periods(periods // 4)  # warm-up
+            _raw_batch(echo_link, periods // 4, frame)
+            for _ in range(batches):
+                bare_us.append(_raw_batch(echo_link, periods, frame))
+                t0 = time.perf_counter()
+                session.run_periods(periods)
+                pty_us.append((time.perf_counter() - t0) / periods * 1e6)
+            status = session.cpu_latency.status
+    finally:
+        echo_link.close()
+        echo_proc.wait(5)
+    bare, pty = statistics.median(bare_us), statistics.median(pty_us)
+    return {"cpu_dma_latency": status if hold_cpu_latency else "not requested",
+            "bare_pty_round_trips_per_s": round(1e6 / bare), "bare_pty_us": round(bare, 2),
+            "stub_pty_periods_per_s": round(1e6 / pty), "stub_pty_us": round(pty, 2),
+            "stub_pty_vs_bare": round(bare / pty, 3),
+            "per_batch_ratio_range": [round(min(b / p for b, p in zip(bare_us, pty_us)), 3),
+                                      round(max(b / p for b, p in zip(bare_us, pty_us)), 3)]}
 
 
 def realtime_hold(period_s: float, duration_s: float) -> dict:
@@ -61,17 +101,20 @@ def run(quick: bool = False) -> dict:
                                                      batches)
             except Exception as exc:  # noqa: BLE001 - a missing back end is reported, not fatal
                 out["lockstep"][key] = {"error": str(exc)}
+    # The protocol's share on a bare pty (bench.protocol), then stub-pty against the bare
+    # echo, batches interleaved, with the sessions' default CPU-latency hold and without it.
     try:
         from bench.protocol import pty_round_trips
 
-        raw = pty_round_trips(2000 if quick else 5000, 3 if quick else 5)
-        out["bare_pty"] = raw
-        bare = raw.get("raw_round_trips_per_s")
-        pty = out["lockstep"].get("stub-pty", {}).get("periods_per_s")
-        if bare and pty:
-            out["stub_pty_vs_bare_pty"] = round(pty / bare, 3)
+        out["bare_pty"] = pty_round_trips(2000 if quick else 5000, 3 if quick else 5)
     except Exception as exc:  # noqa: BLE001
         out["bare_pty"] = {"error": str(exc)}
+    for hold in (True, False):
+        key = "stub_pty_vs_bare_pty" + ("" if hold else "_without_cpu_latency_hold")
+        try:
+            out[key] = stub_pty_vs_bare(hold, 500 if quick else 2000, 3 if quick else 7)
+        except Exception as exc:  # noqa: BLE001
+            out[key] = {"error": str(exc)}
     # Real time: 50 us is the paper's period; then the fastest of a ladder held with no miss.
     hold_s = 2.0 if quick else 10.0
     out["realtime_50us"] = realtime_hold(50e-6, 1.0 if quick else 2.0)

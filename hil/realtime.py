@@ -9,7 +9,7 @@ Python busy-wait at 50 us is late by more than a period hundreds of times in
 * the loop sleeps until ``spin_s`` before a deadline, then busy-waits to it:
   sleeping alone overshoots by 50-100 us, spinning alone steals the core the
   board process needs;
-* while a run lasts, /dev/cpu_dma_latency is held at 0 where permitted (keeps
+* while a run lasts, /dev/cpu_dma_latency is held at 0 where permitted (hil/cpu_latency.py; keeps
   the CPU out of deep idle states, which cuts a pseudo-terminal round trip
   roughly in half); where not permitted this is recorded, not fatal;
 * no SCHED_FIFO (the kernel's RT throttling stalls it ~50 ms per second).
@@ -24,8 +24,6 @@ misses exceed the configured budget.
 """
 from __future__ import annotations
 
-import os
-import struct
 import time
 from typing import Callable
 
@@ -33,30 +31,7 @@ import numpy as np
 
 from protocol.messages import Gates, Sample
 
-
-class DmaLatencyHold:
-    """Holds /dev/cpu_dma_latency at 0 us while open (where the OS permits)."""
-
-    PATH = "/dev/cpu_dma_latency"
-
-    def __init__(self) -> None:
-        self.fd: int | None = None
-        self.status = "not requested"
-
-    def __enter__(self) -> "DmaLatencyHold":
-        try:
-            self.fd = os.open(self.PATH, os.O_WRONLY)
-            os.write(self.fd, struct.pack("<i", 0))
-            self.status = "held at 0 us"
-        except OSError as exc:
-            self.fd = None
-            self.status = f"not available ({exc.strerror})"
-        return self
-
-    def __exit__(self, *exc) -> None:
-        if self.fd is not None:
-            os.close(self.fd)
-            self.fd = None
+from hil.cpu_latency import CpuLatencyHold
 
 
 def lateness_summary(lateness_s: np.ndarray, period_s: float) -> dict:
@@ -95,7 +70,7 @@ def run_realtime(session, count: int, stop: Callable[[], bool] | None = None,
     latest_gates = None
     clock = time.perf_counter_ns
     sleep = time.sleep
-    with DmaLatencyHold() as hold:
+    with CpuLatencyHold() as hold:
         stats["cpu_dma_latency"] = hold.status
         t0 = clock()
         done = 0

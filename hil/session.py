@@ -28,6 +28,7 @@ from protocol.messages import (
 from hil.bench_links import BoardConnection, connect
 from hil.link_tap import LinkTap, tappable
 from hil.board_params import board_parameters
+from hil.cpu_latency import CpuLatencyHold
 from hil.recorder import COMMAND_FIELDS, Recorder
 
 RPM_PER_RAD_S = 60.0 / (2.0 * math.pi)
@@ -53,6 +54,10 @@ class SessionConfig:
     # Frames pass through a LinkTap (raw-frame log, link-fault injection) where the link
     # carries bytes; CAN links carry frames and are not tapped.
     tap_link: bool = True
+    # Hold /dev/cpu_dma_latency at 0 while the session is open, when the board is another
+    # process or device (hil/cpu_latency.py): a board over a pty answers about 4x sooner.
+    # The in-process stub never waits, so it does not take the hold.
+    hold_cpu_latency: bool = True
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)
 
 
@@ -113,6 +118,7 @@ class BenchSession:
         self.fault_injector = None      # hil.faults.injector(session) creates it on first use
         self.tap: LinkTap | None = None
         self.rt_stats: dict[str, Any] = {}
+        self.cpu_latency = CpuLatencyHold()
 
     # ----------------------------------------------------------------- setup
     def __enter__(self) -> "BenchSession":
@@ -128,6 +134,8 @@ class BenchSession:
 
     def start(self) -> None:
         cfg = self.config
+        if cfg.hold_cpu_latency and cfg.link != "stub":
+            self.cpu_latency.acquire()
         if cfg.log_path is not None:
             from hil.mcap_log import McapLog
 
@@ -152,6 +160,7 @@ class BenchSession:
             "bench": {"hil_bench_version": hil.__version__, "python": platform.python_version(),
                       "machine": platform.machine(), "link": self.config.link,
                       "mode": self.config.mode, "seed": str(self.config.seed),
+                      "cpu_dma_latency": self.cpu_latency.status,
                       "protocol_version": str(PROTOCOL_VERSION)},
             "profile": {k: str(v) for k, v in _flatten(self.profile.as_dict()).items()},
         }
@@ -287,11 +296,17 @@ class BenchSession:
                 tap.tick(k)
                 if k % publish_every == 0:
                     recorder.frames(k, tap.take_capture())
-            recorder.period(k, plant.truth(), sample)
-            gates = None
             try:
                 link.send(Sample(k, sample.adc_i1, sample.adc_i2, sample.adc_vdc, sample.encoder,
                                  sample.status))
+            except (OSError, ValueError) as exc:  # LinkError is an OSError: the line is gone
+                recorder.period(k, plant.truth(), sample)
+                self._link_failed(k, exc)
+            # Recorded while a board in another process computes its answer: over a pty
+            # this work hides inside the round trip instead of adding to it.
+            recorder.period(k, plant.truth(), sample)
+            gates = None
+            try:
                 msg = link.recv(answer_timeout)
                 while msg is not None:
                     if type(msg) is Gates:
@@ -415,6 +430,7 @@ class BenchSession:
                 self.log.close()
             except Exception as exc:  # noqa: BLE001
                 errors.append(exc)
+        self.cpu_latency.release()
         if errors and reason is None:
             raise errors[0]
 
