@@ -20,8 +20,10 @@ from hil.session import BenchSession, SessionConfig
 LINKS = ("stub", "stub-pty", "stub-can")
 
 
-def lockstep_rate(link: str, log: bool, periods: int, batches: int) -> dict:
-    profile = load_profile()
+def lockstep_rate(link: str, log: bool, periods: int, batches: int,
+                  controller: dict | None = None) -> dict:
+    """``controller``: overrides of the profile's controller section (e.g. the TELEMETRY rate)."""
+    profile = load_profile(overrides={"controller": controller} if controller else None)
     with tempfile.TemporaryDirectory() as tmp:
         log_path = Path(tmp) / "bench.mcap" if log else None
         with BenchSession(profile, SessionConfig(link=link, log_path=log_path)) as session:
@@ -101,6 +103,13 @@ def run(quick: bool = False) -> dict:
                                                      batches)
             except Exception as exc:  # noqa: BLE001 - a missing back end is reported, not fatal
                 out["lockstep"][key] = {"error": str(exc)}
+    # TELEMETRY is 8 classic CAN frames, each read a byte at a time by python-can's slcan:
+    # the rate a CAN profile gets with telemetry_divider 10 in its controller section.
+    try:
+        out["lockstep"]["stub-can, TELEMETRY 1 in 10"] = lockstep_rate(
+            "stub-can", False, periods // 5, batches, controller={"telemetry_divider": 10})
+    except Exception as exc:  # noqa: BLE001
+        out["lockstep"]["stub-can, TELEMETRY 1 in 10"] = {"error": str(exc)}
     # The protocol's share on a bare pty (bench.protocol), then stub-pty against the bare
     # echo, batches interleaved, with the sessions' default CPU-latency hold and without it.
     try:
