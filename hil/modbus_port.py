@@ -279,6 +279,7 @@ class _PortConfig:
     port: int
     rtu_port: str | None
     rtu_baudrate: int
+    rtu_device_id: int
     load_torque_limit_nm: float | None
     dc_link_voltage_limit_v: float | None
     fault_bits_mask: int
@@ -306,7 +307,7 @@ class _PortServer:
                 servers.append(tcp)
                 self.tcp_address = tuple(tcp.transport.sockets[0].getsockname()[:2])
             if cfg.rtu_port is not None:
-                rtu = ModbusSerialServer(self._device(), framer=FramerType.RTU, port=cfg.rtu_port,
+                rtu = ModbusSerialServer(self._device(cfg.rtu_device_id), framer=FramerType.RTU, port=cfg.rtu_port,
                                          baudrate=cfg.rtu_baudrate)
                 try:
                     await rtu.serve_forever(background=True)
@@ -341,10 +342,12 @@ class _PortServer:
             return OSError(f"Modbus RTU: cannot open serial port {name!r}: {exc}")
         return OSError(f"Modbus RTU: cannot open serial port {name!r}")
 
-    def _device(self) -> SimDevice:
+    def _device(self, device_id: int = 0) -> SimDevice:
+        """device_id 0 answers every unit id (Modbus TCP, where the unit id only matters behind
+        a gateway); on an RTU line, where other devices share the bus, only our own."""
         coils = [SimData(0, count=FAULT_COILS, values=False, datatype=DataType.BITS)]
         discrete = [SimData(0, count=16, values=False, datatype=DataType.BITS)]
-        return SimDevice(id=0, simdata=(coils, discrete, _block(HOLDING_REGISTERS), _block(INPUT_REGISTERS)),
+        return SimDevice(id=device_id, simdata=(coils, discrete, _block(HOLDING_REGISTERS), _block(INPUT_REGISTERS)),
                          action=self._action)
 
     async def _action(self, function_code: int, start_address: int, address: int, count: int,
@@ -447,7 +450,8 @@ def _process_main(config: _PortConfig, mailbox: ControlMailbox, conn) -> None:
 class ModbusPort:
     """Modbus TCP server on ``host:port`` (127.0.0.1 unless told otherwise; port 0 picks a
     free one, see :attr:`tcp_address`) and optionally Modbus RTU on serial port
-    ``rtu_port``, answering any device id.
+    ``rtu_port``. Over TCP it answers any unit id; on the RTU line only ``rtu_device_id``
+    (1-247, default 1), so it can share an RS-485 bus with other devices.
 
     ``isolation``: "thread" runs the server in a thread of this process with its own
     asyncio loop; "process" runs it in a spawned process, so that handling a request
@@ -458,11 +462,14 @@ class ModbusPort:
     """
 
     def __init__(self, mailbox: ControlMailbox, host: str | None = "127.0.0.1", port: int = 5020,
-                 rtu_port: str | None = None, *, rtu_baudrate: int = 19200, load_torque_limit_nm: float | None = None,
+                 rtu_port: str | None = None, *, rtu_baudrate: int = 19200, rtu_device_id: int = 1,
+                 load_torque_limit_nm: float | None = None,
                  dc_link_voltage_limit_v: float | None = None, fault_bits_mask: int = 0xFFFFFFFF,
                  isolation: str = "thread", start_timeout_s: float = 10.0):
         if host is None and rtu_port is None:
             raise ValueError("ModbusPort: give a TCP host or an RTU serial port (or both)")
+        if not (isinstance(rtu_device_id, int) and 1 <= rtu_device_id <= 247):
+            raise ValueError(f"ModbusPort rtu_device_id {rtu_device_id!r}: an RTU device id is 1..247")
         if isolation not in ("thread", "process"):
             raise ValueError(f"ModbusPort isolation {isolation!r}: use 'thread' or 'process'")
         self.mailbox = mailbox
@@ -471,7 +478,7 @@ class ModbusPort:
         self.rtu_port = rtu_port
         self.isolation = isolation
         self.start_timeout_s = start_timeout_s
-        self._config = _PortConfig(host, port, rtu_port, rtu_baudrate, load_torque_limit_nm,
+        self._config = _PortConfig(host, port, rtu_port, rtu_baudrate, rtu_device_id, load_torque_limit_nm,
                                    dc_link_voltage_limit_v, fault_bits_mask)
         self.tcp_address: tuple[str, int] | None = None
         self._thread: threading.Thread | None = None

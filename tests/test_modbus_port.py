@@ -14,6 +14,7 @@ from pathlib import Path
 
 import pytest
 from pymodbus.client import ModbusSerialClient, ModbusTcpClient
+from pymodbus.exceptions import ModbusException
 
 from hil.modbus_port import (HOLDING_REGISTERS, INPUT_REGISTERS, REGISTER_MAP_VERSION, ControlMailbox,
                              ControlRequests, ModbusPort, PlantSnapshot, StateBit, register_map_markdown)
@@ -234,6 +235,12 @@ def test_busy_port_is_a_clear_error(isolation):
         assert not port.running
 
 
+def test_rtu_device_id_out_of_range_is_refused():
+    for bad in (0, 248, 1.5):
+        with pytest.raises(ValueError, match="rtu_device_id .*1..247"):
+            ModbusPort(ControlMailbox(), host=None, rtu_port="/dev/null", rtu_device_id=bad)
+
+
 def test_missing_serial_port_is_a_clear_error():
     with pytest.raises(OSError, match="Modbus RTU: cannot open serial port '/dev/hil-no-such-tty'"):
         ModbusPort(ControlMailbox(), host=None, rtu_port="/dev/hil-no-such-tty").start()
@@ -259,6 +266,19 @@ def test_rtu_over_a_pseudo_terminal_pair(tmp_path):
                 mailbox.publish(PlantSnapshot(1000.0, 1.0, 2.0, 3.0, 0.1, 70.0, period=42))
                 regs = client.read_input_registers(0, count=8, device_id=1).registers
                 assert regs == [100_000 >> 16, 100_000 & 0xFFFF, 100, 200, 300, 100, 7000, 0]
+                client.close()
+                # another device's address on the shared line: the bench keeps quiet
+                other = ModbusSerialClient(str(b), baudrate=115200, timeout=0.3, retries=0)
+                assert other.connect()
+                try:
+                    try:
+                        answered = not other.read_input_registers(0, count=1, device_id=2).isError()
+                    except ModbusException:
+                        answered = False
+                    assert not answered
+                    assert not other.read_input_registers(0, count=1, device_id=1).isError()
+                finally:
+                    other.close()
             finally:
                 client.close()
     finally:
