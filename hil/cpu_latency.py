@@ -40,13 +40,12 @@ class CpuLatencyHold:
         if self.fd is None:
             try:
                 fd = os.open(self.PATH, os.O_WRONLY)
+                try:
+                    os.write(fd, struct.pack("<i", self.latency_us))
+                except OSError:
+                    os.close(fd)
+                    raise
             except OSError as exc:
-                self.status = f"not available ({self.PATH}: {exc.strerror})"
-                return self.status
-            try:
-                os.write(fd, struct.pack("<i", self.latency_us))
-            except OSError as exc:
-                os.close(fd)
                 self.status = f"not available ({self.PATH}: {exc.strerror})"
                 return self.status
             self.fd = fd

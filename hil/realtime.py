@@ -9,7 +9,8 @@ Python busy-wait at 50 us is late by more than a period hundreds of times in
 * the loop sleeps until ``spin_s`` before a deadline, then busy-waits to it:
   sleeping alone overshoots by 50-100 us, spinning alone steals the core the
   board process needs;
-* while a run lasts, /dev/cpu_dma_latency is held at 0 where permitted (hil/cpu_latency.py; keeps
+* while the session lasts, /dev/cpu_dma_latency is held at 0 where permitted (the session's
+  hil/cpu_latency.py hold; keeps
   the CPU out of deep idle states, which cuts a pseudo-terminal round trip
   roughly in half); where not permitted this is recorded, not fatal;
 * no SCHED_FIFO (the kernel's RT throttling stalls it ~50 ms per second).
@@ -30,8 +31,6 @@ from typing import Callable
 import numpy as np
 
 from protocol.messages import Gates, Sample
-
-from hil.cpu_latency import CpuLatencyHold
 
 
 def lateness_summary(lateness_s: np.ndarray, period_s: float) -> dict:
@@ -70,64 +69,63 @@ def run_realtime(session, count: int, stop: Callable[[], bool] | None = None,
     latest_gates = None
     clock = time.perf_counter_ns
     sleep = time.sleep
-    with CpuLatencyHold() as hold:
-        stats["cpu_dma_latency"] = hold.status
-        t0 = clock()
-        done = 0
-        for done in range(1, count + 1):
-            deadline = t0 + (done - 1) * period_ns
-            # Drain answers until the deadline: sleep most of the way, spin the rest.
-            while True:
-                now = clock()
-                msg = link.recv(0.0)
-                while msg is not None:
-                    if type(msg) is Gates:
-                        if msg.period > answered_period:
-                            answered_period = msg.period
-                            latest_gates = msg.gates
-                        else:
-                            late_answers += 1
+    stats["cpu_dma_latency"] = session.cpu_latency.status
+    t0 = clock()
+    done = 0
+    for done in range(1, count + 1):
+        deadline = t0 + (done - 1) * period_ns
+        # Drain answers until the deadline: sleep most of the way, spin the rest.
+        while True:
+            now = clock()
+            msg = link.recv(0.0)
+            while msg is not None:
+                if type(msg) is Gates:
+                    if msg.period > answered_period:
+                        answered_period = msg.period
+                        latest_gates = msg.gates
                     else:
-                        dispatch(msg)
-                    msg = link.recv(0.0)
-                remaining = deadline - clock()
-                if remaining <= 0:
-                    break
-                if remaining > spin_s * 1e9:
-                    sleep((remaining - spin_s * 1e9) / 1e9)
-            tick = clock()
-            late_s = (tick - deadline) / 1e9
-            lateness.append(late_s)
-            if late_s > period_s:
-                misses += 1
-            sample = plant.sample()
-            k = sample.period
-            if k > 0 and answered_period < k - 1:
-                missing += 1
-                if k - 1 - answered_period >= watchdog:
-                    plant.safe_state()
-                    session._rt_answered_period = answered_period
-                    why = (f"the board process exited with status {session.conn.board_exit_status()}"
-                           if not session.conn.board_alive() else
-                           f"no GATES for {k - 1 - answered_period} consecutive periods")
-                    session.error = f"watchdog at period {k} (t = {k * session.period_s:.6f} s): {why}"
-                    session.event("watchdog", period=k, reason=why)
-                    _store(stats, lateness, period_s, late_answers, missing, overruns)
-                    raise SessionError(session.error)
-            link.send(Sample(k, sample.adc_i1, sample.adc_i2, sample.adc_vdc, sample.encoder,
-                             sample.status))
-            recorder.period(k, plant.truth(), sample)
-            plant.step(latest_gates)
-            if clock() - tick > period_ns:
-                overruns += 1
-            if misses > budget:
+                        late_answers += 1
+                else:
+                    dispatch(msg)
+                msg = link.recv(0.0)
+            remaining = deadline - clock()
+            if remaining <= 0:
+                break
+            if remaining > spin_s * 1e9:
+                sleep((remaining - spin_s * 1e9) / 1e9)
+        tick = clock()
+        late_s = (tick - deadline) / 1e9
+        lateness.append(late_s)
+        if late_s > period_s:
+            misses += 1
+        sample = plant.sample()
+        k = sample.period
+        if k > 0 and answered_period < k - 1:
+            missing += 1
+            if k - 1 - answered_period >= watchdog:
                 plant.safe_state()
-                session.error = (f"real-time clock missed {misses} deadlines (budget {budget}) "
-                                 f"at {period_s * 1e6:g} us per period")
+                session._rt_answered_period = answered_period
+                why = (f"the board process exited with status {session.conn.board_exit_status()}"
+                       if not session.conn.board_alive() else
+                       f"no GATES for {k - 1 - answered_period} consecutive periods")
+                session.error = f"watchdog at period {k} (t = {k * session.period_s:.6f} s): {why}"
+                session.event("watchdog", period=k, reason=why)
                 _store(stats, lateness, period_s, late_answers, missing, overruns)
                 raise SessionError(session.error)
-            if stop is not None and stop():
-                break
+        link.send(Sample(k, sample.adc_i1, sample.adc_i2, sample.adc_vdc, sample.encoder,
+                         sample.status))
+        recorder.period(k, plant.truth(), sample)
+        plant.step(latest_gates)
+        if clock() - tick > period_ns:
+            overruns += 1
+        if misses > budget:
+            plant.safe_state()
+            session.error = (f"real-time clock missed {misses} deadlines (budget {budget}) "
+                             f"at {period_s * 1e6:g} us per period")
+            _store(stats, lateness, period_s, late_answers, missing, overruns)
+            raise SessionError(session.error)
+        if stop is not None and stop():
+            break
     session._rt_answered_period = answered_period
     _store(stats, lateness, period_s, late_answers, missing, overruns)
     return done

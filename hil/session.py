@@ -54,9 +54,9 @@ class SessionConfig:
     # Frames pass through a LinkTap (raw-frame log, link-fault injection) where the link
     # carries bytes; CAN links carry frames and are not tapped.
     tap_link: bool = True
-    # Hold /dev/cpu_dma_latency at 0 while the session is open, when the board is another
-    # process or device (hil/cpu_latency.py): a board over a pty answers about 4x sooner.
-    # The in-process stub never waits, so it does not take the hold.
+    # Hold /dev/cpu_dma_latency at 0 while the session is open (hil/cpu_latency.py) when the
+    # board is another process or device (over a pty it answers about 4x sooner) and in real
+    # time (wake-ups on time). The in-process stub in lockstep never waits: no hold.
     hold_cpu_latency: bool = True
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)
 
@@ -134,7 +134,7 @@ class BenchSession:
 
     def start(self) -> None:
         cfg = self.config
-        if cfg.hold_cpu_latency and cfg.link != "stub":
+        if cfg.hold_cpu_latency and (cfg.link != "stub" or cfg.mode == "realtime"):
             self.cpu_latency.acquire()
         if cfg.log_path is not None:
             from hil.mcap_log import McapLog
@@ -296,17 +296,11 @@ class BenchSession:
                 tap.tick(k)
                 if k % publish_every == 0:
                     recorder.frames(k, tap.take_capture())
-            try:
-                link.send(Sample(k, sample.adc_i1, sample.adc_i2, sample.adc_vdc, sample.encoder,
-                                 sample.status))
-            except (OSError, ValueError) as exc:  # LinkError is an OSError: the line is gone
-                recorder.period(k, plant.truth(), sample)
-                self._link_failed(k, exc)
-            # Recorded while a board in another process computes its answer: over a pty
-            # this work hides inside the round trip instead of adding to it.
             recorder.period(k, plant.truth(), sample)
             gates = None
             try:
+                link.send(Sample(k, sample.adc_i1, sample.adc_i2, sample.adc_vdc, sample.encoder,
+                                 sample.status))
                 msg = link.recv(answer_timeout)
                 while msg is not None:
                     if type(msg) is Gates:
