@@ -1,33 +1,66 @@
 #!/usr/bin/env bash
 # Sets up everything the bench needs on a fresh Debian machine that has python3, gcc and make:
-# system packages (apt-get, as root), a .venv with the package installed, the C code built.
-# Idempotent and quick when nothing changed.
+# system packages (apt-get, as root), a .venv with the package installed from the lock file,
+# the C code built. Idempotent and quick when nothing changed.
+#
+# A package counts as present only when every FILE the build takes from it is there, not
+# just its binary: clang without libclang-rt-14-dev compiles, then fails to link a fuzzer
+# (issue 12). After installing, the same files are checked again and a missing one is named.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-# Debian package -> a file that proves it is installed
+arch=$(uname -m)
+# Debian package -> files (shell globs) the build or the tests use from it, ';'-separated.
 declare -A NEEDED=(
-  [libcmocka-dev]=/usr/include/cmocka.h
-  [clang]=/usr/bin/clang
-  [valgrind]=/usr/bin/valgrind
-  [cppcheck]=/usr/bin/cppcheck
-  [gcc-arm-none-eabi]=/usr/bin/arm-none-eabi-gcc
-  [libnewlib-arm-none-eabi]=/usr/lib/arm-none-eabi/newlib
-  [qemu-system-arm]=/usr/bin/qemu-system-arm
-  [socat]=/usr/bin/socat
+  [libcmocka-dev]="/usr/include/cmocka.h;/usr/lib/*/libcmocka.so"
+  [clang]="/usr/bin/clang"
+  # libFuzzer and the sanitizer runtimes that `clang -fsanitize=fuzzer,address,undefined` links
+  [libclang-rt-14-dev]="/usr/lib/llvm-*/lib/clang/*/lib/linux/libclang_rt.fuzzer-${arch}.a;/usr/lib/llvm-*/lib/clang/*/lib/linux/libclang_rt.asan-${arch}.a;/usr/lib/llvm-*/lib/clang/*/lib/linux/libclang_rt.ubsan_standalone-${arch}.a"
+  # gcc's own sanitizer runtimes (tests built with gcc -fsanitize=address,undefined)
+  [libasan8]="/usr/lib/gcc/*/*/libasan.so"
+  [libubsan1]="/usr/lib/gcc/*/*/libubsan.so"
+  [valgrind]="/usr/bin/valgrind"
+  [cppcheck]="/usr/bin/cppcheck"
+  [gcc-arm-none-eabi]="/usr/bin/arm-none-eabi-gcc;/usr/lib/gcc/arm-none-eabi/*/thumb/v7e-m+fp/hard/libgcc.a"
+  # newlib-nano for the hard-float Cortex-M4F (the QEMU image links --specs=nano.specs -lc -lm)
+  [libnewlib-arm-none-eabi]="/usr/lib/arm-none-eabi/newlib/nano.specs;/usr/lib/arm-none-eabi/newlib/thumb/v7e-m+fp/hard/libc_nano.a;/usr/lib/arm-none-eabi/newlib/thumb/v7e-m+fp/hard/libm.a"
+  [qemu-system-arm]="/usr/bin/qemu-system-arm"
+  [socat]="/usr/bin/socat"
+  # headless browser for the report rendering test
+  [chromium]="/usr/bin/chromium"
+  # python3 -m venv needs ensurepip's wheels
+  [python3-venv]="PYTHON:ensurepip,venv"
 )
+
+present() {  # present PKG -> 0 when every file of PKG is there
+  local spec f
+  IFS=';' read -ra specs <<<"${NEEDED[$1]}"
+  for spec in "${specs[@]}"; do
+    if [[ $spec == PYTHON:* ]]; then
+      python3 -c "import ${spec#PYTHON:}" >/dev/null 2>&1 || { MISSING_FILE="python3 modules ${spec#PYTHON:}"; return 1; }
+      continue
+    fi
+    # shellcheck disable=SC2206
+    local matches=( $spec )
+    [ -e "${matches[0]}" ] || { MISSING_FILE=$spec; return 1; }
+  done
+}
+
 missing=()
 for pkg in "${!NEEDED[@]}"; do
-  [ -e "${NEEDED[$pkg]}" ] || missing+=("$pkg")
+  present "$pkg" || missing+=("$pkg")
 done
-if ! python3 -c 'import ensurepip, venv' >/dev/null 2>&1; then
-  missing+=("python3-venv")
-fi
 if [ ${#missing[@]} -gt 0 ]; then
   if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
     echo "bootstrap: installing ${missing[*]} with apt-get" >&2
     apt-get update -qq
     DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+    for pkg in "${missing[@]}"; do
+      if ! present "$pkg"; then
+        echo "bootstrap: $pkg is installed but $MISSING_FILE is still missing" >&2
+        exit 1
+      fi
+    done
   else
     echo "bootstrap: missing Debian packages: ${missing[*]}" >&2
     echo "bootstrap: install them with: sudo apt-get update && sudo apt-get install -y ${missing[*]}" >&2
@@ -38,10 +71,12 @@ fi
 if [ ! -x .venv/bin/python ]; then
   python3 -m venv .venv
 fi
+# The environment CI and users run is the lock file's (hashes checked); the package itself
+# is installed on top without resolving again. pyproject.toml keeps compatible ranges.
 stamp=.venv/.hil-installed
-if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
-  .venv/bin/python -m pip install -q --upgrade pip
-  .venv/bin/python -m pip install -q -e '.[test]'
+if [ ! -f "$stamp" ] || [ requirements.lock -nt "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
+  .venv/bin/python -m pip install -q --disable-pip-version-check --require-hashes -r requirements.lock
+  .venv/bin/python -m pip install -q --disable-pip-version-check --no-deps --no-build-isolation -e .
   touch "$stamp"
 fi
 
