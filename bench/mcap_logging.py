@@ -18,7 +18,7 @@ import time
 
 import numpy as np
 
-from hil.mcap_log import McapLog
+from hil.logs.mcap_writer import McapLog
 
 PERIOD_S = 50e-6
 FRAMES_PER_BATCH = 20  # one frames_in and one frames_out message per millisecond at 50 us
@@ -138,7 +138,7 @@ def run(quick: bool = False) -> dict:
                 path = os.path.join(tmp, f"{compression}_{chunk_size}.mcap")
                 elapsed = _run_session(path, n, data, compression, chunk_size)
                 best[(compression, chunk_size)] = min(best[(compression, chunk_size)], elapsed)
-        from hil.log_reader import log_summary
+        from hil.logs.reader import log_summary
         for (compression, chunk_size), elapsed in best.items():
             path = os.path.join(tmp, f"{compression}_{chunk_size}.mcap")
             summary = log_summary(path)

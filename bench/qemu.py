@@ -4,7 +4,7 @@ per speed source, and the firmware's flash and RAM. `hil bench` prints it beside
 figure of bench/stub.py (x86-64 instructions counted with callgrind)."""
 from __future__ import annotations
 
-from hil.qemu_board import measure_control_step
+from hil.links.qemu import measure_control_step
 
 
 def run(quick: bool = False) -> dict:

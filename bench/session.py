@@ -15,7 +15,7 @@ from pathlib import Path
 
 from plant_rt import load_profile
 
-from hil.session import BenchSession, SessionConfig
+from hil.session.bench_session import BenchSession, SessionConfig
 
 LINKS = ("stub", "stub-pty", "stub-can")
 

@@ -70,7 +70,7 @@ def closed_loop(source: int, seconds_per_step: float = 0.3) -> dict[str, float]:
     """Speed steps 0 -> 157.08 -> 314.16 rad/s with speed source `source`; figures vs truth."""
     import numpy as np
 
-    from hil.stub_library import StubLibraryLink
+    from hil.links.stub_library import StubLibraryLink
     from plant_rt import TRUTH_FIELDS, Plant, load_profile
     from protocol.messages import Command, Gates, ParamId, ParamSet, Sample, Telemetry
 

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from plant_rt.spec import param
+from configfile.fields import param
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,9 @@
 """Two-level three-leg voltage-source inverter: gate commands to switch timing and leg states.
 
-Gate bits are protocol/c/hil_proto.h's HIL_GATE_*: per leg one high-side and one low-side
-switch. A leg with exactly one switch on ties its phase terminal to DC+ (H) or DC- (L); a leg
+The switch word has one bit per switch, per leg one high-side and one low-side switch
+(SWITCH_* below). It is the same layout as the protocol's GATES word (protocol/SPEC.md,
+HIL_GATE_*), so the bench hands a board's word to the plant unchanged; the plant itself knows
+nothing of the protocol (tests/test_architecture.py checks that the two layouts agree). A leg with exactly one switch on ties its phase terminal to DC+ (H) or DC- (L); a leg
 with both off (dead time, or a command that opens it) conducts through its diodes according to
 the current direction, and carries no current once that current has reached zero; a leg with
 both on is a shoot-through, which the gate driver's desaturation protection answers by turning
@@ -24,11 +26,18 @@ import math
 import operator
 from dataclasses import dataclass
 
-from plant_rt.spec import param
+from configfile.fields import param
 
-from protocol.messages import GATE_A_HIGH, GATE_A_LOW, GATE_B_HIGH, GATE_B_LOW, GATE_C_HIGH, GATE_C_LOW
+#: Switch bits of the switch word, 1 = switch on.
+SWITCH_A_HIGH = 0x01
+SWITCH_A_LOW = 0x02
+SWITCH_B_HIGH = 0x04
+SWITCH_B_LOW = 0x08
+SWITCH_C_HIGH = 0x10
+SWITCH_C_LOW = 0x20
 
-LEG_BITS = ((GATE_A_HIGH, GATE_A_LOW), (GATE_B_HIGH, GATE_B_LOW), (GATE_C_HIGH, GATE_C_LOW))
+LEG_BITS = ((SWITCH_A_HIGH, SWITCH_A_LOW), (SWITCH_B_HIGH, SWITCH_B_LOW),
+            (SWITCH_C_HIGH, SWITCH_C_LOW))
 
 #: Table 2 switching states (s_a s_b s_c), 1 = high side on, as gate words.
 VECTOR_GATES = {
@@ -112,7 +121,7 @@ class Command:
             except TypeError:
                 word = -1
             if isinstance(gates, bool) or not 0 <= word <= 0x3F:
-                raise ValueError(f"gates must be an int 0..0x3F of HIL_GATE_* bits, got {gates!r}")
+                raise ValueError(f"gates must be an int 0..0x3F of SWITCH_* bits, got {gates!r}")
             return GATE_COMMANDS[word]
         if duty is not None:
             try:

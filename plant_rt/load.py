@@ -17,7 +17,7 @@ import math
 from dataclasses import dataclass
 from typing import Callable, Iterable
 
-from plant_rt.spec import param
+from configfile.fields import param
 
 
 @dataclass(frozen=True)

@@ -20,7 +20,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from math import cos, sin
 
-from plant_rt.spec import param
+from configfile.fields import param
 
 
 @dataclass(frozen=True)

@@ -12,7 +12,7 @@ with all legs driven, an ideal DC link and no device drop, by the motor's plain-
 (the fast path: one RK4 step per 50 us); otherwise by the general network with diode events
 (plant_rt.circuit).
 
-Fault hooks (hil/faults.py drives them; each costs nothing while it is off):
+Fault hooks (hil/faults/injector.py drives them; each costs nothing while it is off):
 
     set_open_phase('a')            one motor phase disconnected: its current is exactly zero
     set_gate_stuck('b_high', 'on') a switch stuck on or off whatever the board commands
@@ -40,7 +40,7 @@ from plant_rt.load import Load
 from plant_rt.motor import MotorModel
 from plant_rt.profile import BenchProfile
 from plant_rt.sensors import STATUS_GATE_FAULT, STATUS_INDEX_PULSE, SensorSample, Sensors
-from plant_rt.spec import coerce
+from configfile.fields import coerce
 
 TWO_PI = 2.0 * pi
 RPM_PER_RAD_S = 60.0 / TWO_PI
@@ -58,7 +58,7 @@ _UNIT_VECTORS = tuple(None if driven_vector(g, 1.0) is None
 _DRIVEN_WORDS = tuple((g, unit) for g, unit in enumerate(_UNIT_VECTORS) if unit is not None)
 PHASES = ("a", "b", "c")
 SWITCHES = ("a_high", "a_low", "b_high", "b_low", "c_high", "c_low")
-#: Names a test plan uses for motor constants (hil/plan.py PLANT_PARAMS) -> MotorParams fields.
+#: Names a test plan uses for motor constants (hil/faults/catalog.py PLANT_PARAMS) -> MotorParams fields.
 PARAM_ALIASES = {"inductance_h": ("inductance_d_h", "inductance_q_h"),
                  "ld_h": ("inductance_d_h",), "lq_h": ("inductance_q_h",)}
 #: Drift ramps update the motor every this many seconds (a parameter change re-derives the

@@ -12,26 +12,33 @@ from the overrides.
 from __future__ import annotations
 
 import copy
+import re
 import dataclasses
 import typing
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
-from hil.yaml_source import ConfigError, YamlDocument, format_key, load_yaml
-from protocol.messages import ParamId
+from configfile.schema import SchemaChecker, dataclass_schema, nullable, obj
+from configfile.source import ConfigError, YamlDocument, format_key, load_yaml
 
 from plant_rt.dc_link import DcLinkParams
 from plant_rt.inverter import InverterParams
 from plant_rt.load import LoadParams
 from plant_rt.motor import MotorParams
 from plant_rt.sensors import SensorParams
-from plant_rt.spec import coerce, param, to_float
+from configfile.fields import coerce, param, to_float
 
-#: Controller parameters the bench may push with PARAM_SET: the hil_param_id names of
-#: protocol/c/hil_proto.h, lower case, without the HIL_PARAM_ prefix.
-CONTROLLER_PARAMS = tuple(p.name.lower() for p in ParamId)
-READ_ONLY_PARAMS = (ParamId.CONTROL_STEP_CYCLES.name.lower(),)
+
+
+@dataclass(frozen=True)
+class ControllerNames:
+    """Which names the profile's `controller` section may hold. The plant does not know the
+    board's parameters (they belong to the protocol); the bench passes its list
+    (hil.session.board_params.CONTROLLER_NAMES), anyone else gets any lower-case name."""
+
+    settable: tuple[str, ...] | None = None   # None: any lower_snake_case name
+    read_only: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -75,7 +82,19 @@ class BenchProfile:
         return out
 
 
+_SNAKE = re.compile(r"^[a-z][a-z0-9_]*$")
+
 SECTIONS = {f.name for f in dataclasses.fields(BenchProfile)} - {"source"}
+
+
+def profile_schema() -> dict:
+    """The profile's structure as JSON Schema (configfile.schema): every section a parameter
+    dataclass, `controller` a mapping whose names the bench checks."""
+    hints = typing.get_type_hints(BenchProfile)
+    sections = {name: nullable(dataclass_schema(hints[name]))
+                for name in SECTIONS if name != "controller"}
+    sections["controller"] = {"type": ["object", "null"]}
+    return obj(sections)
 
 
 def default_profile_path() -> Path:
@@ -83,8 +102,9 @@ def default_profile_path() -> Path:
 
 
 def load_profile(path: str | Path | None = None,
-                 overrides: dict[str, Any] | None = None) -> BenchProfile:
-    """Reads and validates a bench profile; raises hil.yaml_source.ConfigError on a bad value."""
+                 overrides: dict[str, Any] | None = None,
+                 controller_names: ControllerNames = ControllerNames()) -> BenchProfile:
+    """Reads and validates a bench profile; raises configfile.ConfigError on a bad value."""
     path = Path(path) if path is not None else default_profile_path()
     doc = load_yaml(path)
     data = doc.data if doc.data is not None else {}
@@ -97,11 +117,15 @@ def load_profile(path: str | Path | None = None,
             raise doc.error((), "a bench profile is a mapping of sections")
         data = copy.deepcopy(data)
         _merge(data, overrides, (), marks)
-    return build_profile(data, _error_factory(doc, marks), doc.source)
+    err = _error_factory(doc, marks)
+    if isinstance(data, dict):
+        SchemaChecker(doc, error=err).check(profile_schema(), data)
+    return build_profile(data, _error_factory(doc, marks), doc.source, controller_names)
 
 
 def build_profile(data: Any, err: Callable[[tuple, str], ConfigError],
-                  source: str = "<data>") -> BenchProfile:
+                  source: str = "<data>",
+                  controller_names: ControllerNames = ControllerNames()) -> BenchProfile:
     """Validates already-parsed profile data; `err(key_path, message)` makes the errors."""
     if not isinstance(data, dict):
         raise err((), "a bench profile is a mapping of sections "
@@ -112,7 +136,7 @@ def build_profile(data: Any, err: Callable[[tuple, str], ConfigError],
         if key not in SECTIONS:
             raise err((key,), f"unknown section (known: {', '.join(sorted(SECTIONS))})")
         if key == "controller":
-            sections[key] = _controller(value, err)
+            sections[key] = _controller(value, err, controller_names)
         else:
             sections[key] = _build(hints[key], value, (key,), err)
     profile = BenchProfile(**sections, source=source)
@@ -141,7 +165,8 @@ def _build(cls: type, data: Any, path: tuple, err: Callable[[tuple, str], Config
     return cls(**kwargs)
 
 
-def _controller(data: Any, err: Callable[[tuple, str], ConfigError]) -> dict[str, float]:
+def _controller(data: Any, err: Callable[[tuple, str], ConfigError],
+                names: ControllerNames) -> dict[str, float]:
     if data is None:
         return {}
     if not isinstance(data, dict):
@@ -149,12 +174,13 @@ def _controller(data: Any, err: Callable[[tuple, str], ConfigError]) -> dict[str
     out = {}
     for key, value in data.items():
         path = ("controller", key)
-        if key not in CONTROLLER_PARAMS:
-            settable = [p for p in CONTROLLER_PARAMS if p not in READ_ONLY_PARAMS]
-            raise err(path, f"unknown controller parameter (known: {', '.join(settable)})")
-        if key in READ_ONLY_PARAMS:
+        if key in names.read_only:
             raise err(path, "read-only controller parameter: the board reports it, the bench "
                             "cannot set it")
+        if names.settable is not None and key not in names.settable:
+            raise err(path, f"unknown controller parameter (known: {', '.join(names.settable)})")
+        if names.settable is None and not (isinstance(key, str) and _SNAKE.match(key)):
+            raise err(path, "a controller parameter name is lower_snake_case")
         try:
             out[key] = to_float(value)
         except ValueError as exc:

@@ -13,7 +13,7 @@ Noise is Gaussian in counts, one seeded stream per channel (numpy PCG64 drawn in
 per-sample cost is a list lookup and changing one channel's noise never shifts another's).
 Every channel attribute may be changed while the plant runs (fault injection).
 
-Faults (hil/faults.py switches them): an ADC channel may be stuck at a code or saturate inside a
+Faults (hil/faults/injector.py switches them): an ADC channel may be stuck at a code or saturate inside a
 window [low, high] of codes narrower than the converter's; an encoder may be frozen, lose a
 fraction of its edges (the lost counts accumulate, as a real counter's would), jitter by a
 Gaussian number of counts (spurious edges that a quadrature decoder counts forward and back,
@@ -29,7 +29,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from plant_rt.spec import param
+from configfile.fields import param
 
 STATUS_INDEX_PULSE = 0x01
 STATUS_OVERCURRENT = 0x02

@@ -16,12 +16,12 @@ import pytest
 from protocol.links import open_link
 from protocol.messages import PROTOCOL_VERSION
 
-from hil.cli import main as hil_main
-from hil.log_reader import read_log
+from hil.cli.main import main as hil_main
+from hil.logs.reader import read_log
 from tests.fake_board import FakeBoard
 
 REPO = Path(__file__).resolve().parent.parent
-HIL = [sys.executable, "-m", "hil.cli"]
+HIL = [sys.executable, "-m", "hil.cli.main"]
 
 TINY = """name: tiny
 steps:

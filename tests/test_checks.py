@@ -6,11 +6,11 @@ import math
 import numpy as np
 import pytest
 
-from hil import checks
-from hil.checks import CheckError, evaluate_check
-from hil.outcome import CheckResult, Outcome
-from hil.plan import parse_plan
-from hil.signals import Signal, SignalSet
+from hil.plans import checks
+from hil.plans.checks import CheckError, evaluate_check
+from hil.plans.outcome import CheckResult, Outcome
+from hil.plans.format import parse_plan
+from hil.plans.signals import Signal, SignalSet
 
 DT = 50e-6  # the paper's control period: one sample per period
 

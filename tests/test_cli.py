@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from hil.cli import main as hil_main
+from hil.cli.main import main as hil_main
 
 REPO = Path(__file__).resolve().parent.parent
 SPEED_STEP = REPO / "test_plans" / "01_speed_step_sensored.yaml"
@@ -90,13 +90,13 @@ def test_plans_lists_and_validates(tmp_path, capsys):
 
 def test_serve_runs_the_plant_against_the_stub_for_a_duration(tmp_path):
     log = tmp_path / "serve.mcap"
-    proc = subprocess.run([sys.executable, "-m", "hil.cli", "serve", "--link", "stub", "--duration",
+    proc = subprocess.run([sys.executable, "-m", "hil.cli.main", "serve", "--link", "stub", "--duration",
                            "0.02", "--modbus", "off", "--log", str(log), "--enable",
                            "--speed-rpm", "1000"],
                           capture_output=True, text=True, timeout=120, cwd=REPO)
     assert proc.returncode == 0, proc.stderr
     assert "400 periods" in proc.stderr
-    from hil.log_reader import read_log
+    from hil.logs.reader import read_log
 
     truth = read_log(log)["/plant/truth"]
     assert len(truth) == 400 and truth["speed_rpm"][-1] > 50.0  # the board drove the motor
@@ -104,6 +104,6 @@ def test_serve_runs_the_plant_against_the_stub_for_a_duration(tmp_path):
 
 def test_help_for_every_command():
     for command in ([], ["run"], ["serve"], ["log"], ["bench"], ["plans"]):
-        proc = subprocess.run([sys.executable, "-m", "hil.cli", *command, "--help"],
+        proc = subprocess.run([sys.executable, "-m", "hil.cli.main", *command, "--help"],
                               capture_output=True, text=True, timeout=60, cwd=REPO)
         assert proc.returncode == 0 and "usage: hil" in proc.stdout

@@ -6,8 +6,8 @@ import struct
 
 from plant_rt import load_profile
 
-from hil.cpu_latency import CpuLatencyHold
-from hil.session import BenchSession, SessionConfig
+from hil.session.cpu_latency import CpuLatencyHold
+from hil.session.bench_session import BenchSession, SessionConfig
 
 
 def test_hold_writes_the_latency_and_releases_it(tmp_path, monkeypatch):

@@ -12,10 +12,10 @@ import pytest
 
 from plant_rt import load_profile
 
-from hil.faults import LINK_KINDS, injector
-from hil.link_tap import LinkFault, LinkTap, _flip_bits
-from hil.log_reader import read_log
-from hil.session import BenchSession, SessionConfig, SessionError
+from hil.faults.injector import LINK_KINDS, injector
+from hil.session.link_tap import LinkFault, LinkTap, _flip_bits
+from hil.logs.reader import read_log
+from hil.session.bench_session import BenchSession, SessionConfig, SessionError
 from protocol.codec import FrameEncoder, StreamDecoder
 from protocol.messages import Sample
 

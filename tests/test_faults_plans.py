@@ -5,9 +5,9 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from hil.cli import main as hil_main
-from hil.log_reader import read_log
-from hil.plan import load_plan, plan_files
+from hil.cli.main import main as hil_main
+from hil.logs.reader import read_log
+from hil.plans.format import load_plan, plan_files
 
 FAULT_PLANS = Path(__file__).resolve().parent.parent / "test_plans" / "faults"
 

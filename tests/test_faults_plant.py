@@ -1,5 +1,5 @@
 """Plant fault hooks against analytic results: open phase, stuck gates, DC ripple and ramps,
-parameter drift, sensor and encoder faults (plant_rt; hil/faults.py switches them)."""
+parameter drift, sensor and encoder faults (plant_rt; hil/faults/injector.py switches them)."""
 from __future__ import annotations
 
 import math

@@ -11,10 +11,10 @@ import pytest
 
 from plant_rt import load_profile
 
-from hil.faults import BIT_OF, MODBUS_BIT_MASK, MODBUS_BITS, apply_fault, apply_fault_bits, injector
-from hil.log_reader import read_log
-from hil.plan import FAULTS, FaultStep
-from hil.session import BenchSession, SessionConfig
+from hil.faults.injector import BIT_OF, MODBUS_BIT_MASK, MODBUS_BITS, apply_fault, apply_fault_bits, injector
+from hil.logs.reader import read_log
+from hil.plans.format import FAULTS, FaultStep
+from hil.session.bench_session import BenchSession, SessionConfig
 
 T = 50e-6
 LSB_I = 25.0 / 2048
@@ -42,7 +42,7 @@ def _fault_events(session) -> list[dict]:
 def test_every_plan_fault_has_one_modbus_bit_and_valid_defaults():
     assert sorted(BIT_OF) == sorted(FAULTS)
     assert len(set(BIT_OF.values())) == len(FAULTS) and MODBUS_BIT_MASK < 1 << 32
-    from hil.faults import validate
+    from hil.faults.injector import validate
 
     for name, args in MODBUS_BITS.values():
         validate(name, args)          # the Modbus defaults obey the plan schema
@@ -136,13 +136,13 @@ def test_modbus_coil_injects_a_fault_end_to_end():
     active-faults input register reads it back, clearing the coil lifts it."""
     from pymodbus.client import ModbusTcpClient
 
-    from hil.modbus_port import INPUT_REGISTERS, ControlMailbox, ModbusPort
+    from hil.ports.modbus import INPUT_REGISTERS, ControlMailbox, ModbusPort
 
     port = _free_port()
     mailbox = ControlMailbox()
     active = next(f for f in INPUT_REGISTERS if f.name == "fault_bits_active")
     with _session() as session:
-        session.attach_mailbox(mailbox)
+        session.attach_mailbox(mailbox, on_fault_bits=lambda bits: apply_fault_bits(session, bits))
         session.send_command(enable=True, speed_source="ekf", speed_ref_rpm=1000)
         with ModbusPort(mailbox, host="127.0.0.1", port=port, fault_bits_mask=MODBUS_BIT_MASK):
             session.run_periods(2000)

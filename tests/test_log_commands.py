@@ -8,9 +8,9 @@ import math
 import numpy as np
 import pytest
 
-from hil.log_commands import (LogCommandError, _envelope, format_info, log_export, log_info, log_plot,
+from hil.logs.commands import (LogCommandError, _envelope, format_info, log_export, log_info, log_plot,
                               parse_signal)
-from hil.mcap_log import McapLog
+from hil.logs.mcap_writer import McapLog
 
 PERIOD_NS = 50_000
 N = 4000  # 0.2 s at 50 us

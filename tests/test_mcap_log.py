@@ -23,8 +23,8 @@ from mcap.reader import NonSeekingReader, SeekingReader
 from mcap.records import Chunk, Message
 from mcap.stream_reader import breakup_chunk
 
-from hil.log_reader import LogFileError, log_summary, read_log
-from hil.mcap_log import FIXED_TYPES, McapLog
+from hil.logs.reader import LogFileError, log_summary, read_log
+from hil.logs.mcap_writer import FIXED_TYPES, McapLog
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -307,7 +307,7 @@ def test_unfinished_file_keeps_all_but_the_open_chunk(tmp_path):
 
 _CHILD = """
 import sys, time
-from hil.mcap_log import McapLog
+from hil.logs.mcap_writer import McapLog
 log = McapLog(sys.argv[1], metadata={"run": {"who": "child"}})
 ch = log.add_fixed_channel("/plant/truth", "hil.T", [("k", "fixed64"), ("x", "double")])
 k = 0

@@ -16,7 +16,7 @@ import pytest
 from pymodbus.client import ModbusSerialClient, ModbusTcpClient
 from pymodbus.exceptions import ModbusException
 
-from hil.modbus_port import (HOLDING_REGISTERS, INPUT_REGISTERS, REGISTER_MAP_VERSION, ControlMailbox,
+from hil.ports.modbus import (HOLDING_REGISTERS, INPUT_REGISTERS, REGISTER_MAP_VERSION, ControlMailbox,
                              ControlRequests, ModbusPort, PlantSnapshot, StateBit, register_map_markdown)
 
 REPO = Path(__file__).resolve().parents[1]
@@ -292,7 +292,7 @@ def test_docs_carry_the_register_map_from_the_code():
 
 _PARENT = """
 import os, sys, time
-from hil.modbus_port import ControlMailbox, ModbusPort
+from hil.ports.modbus import ControlMailbox, ModbusPort
 if __name__ == "__main__":
     port = ModbusPort(ControlMailbox(), port=0, isolation="process").start()
     print(port._process.pid, port.tcp_address[1], flush=True)

@@ -6,11 +6,11 @@ from pathlib import Path
 
 import pytest
 
-from hil.checks import CHECK_KINDS
-from hil.plan import (BOARD_PARAMS, FAULTS, PLANT_PARAMS, STEP_SCHEMAS, CheckStep, CommandStep,
+from hil.plans.checks import CHECK_KINDS
+from hil.plans.format import (BOARD_PARAMS, FAULTS, PLANT_PARAMS, STEP_SCHEMAS, CheckStep, CommandStep,
                       FaultStep, LoadStep, MarkStep, RunStep, WaitUntilStep, load_plan,
                       looks_like_plan, parse_plan, plan_files)
-from hil.yaml_source import ConfigError
+from configfile.source import ConfigError
 
 REPO = Path(__file__).resolve().parents[1]
 PLANS = REPO / "test_plans"

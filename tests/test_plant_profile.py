@@ -7,9 +7,9 @@ from pathlib import Path
 
 import pytest
 
-from hil.yaml_source import ConfigError
+from configfile.source import ConfigError
 from plant_rt import BenchProfile, Plant, default_profile_path, load_profile
-from plant_rt.profile import CONTROLLER_PARAMS
+from hil.session.board_params import READ_ONLY_PARAMS, SETTABLE_PARAMS, load_bench_profile
 
 
 def write(tmp_path, text: str):
@@ -55,7 +55,7 @@ def test_missing_keys_take_the_papers_values(tmp_path):
 
 def expect_error(path, message: str, line: int, key: str) -> ConfigError:
     with pytest.raises(ConfigError) as info:
-        load_profile(path)
+        load_bench_profile(path)     # the plant's checks and the bench's controller names
     err = info.value
     assert err.source == str(path) and err.line == line and err.key == key
     assert message in str(err)
@@ -96,7 +96,7 @@ def test_unknown_keys_and_sections_are_rejected(tmp_path):
     expect_error(write(tmp_path, """
         motr:
           pole_pairs: 1
-    """), "unknown section", 1, "motr")
+    """), "unknown key 'motr'; did you mean 'motor'?", 1, "motr")
 
 
 @pytest.mark.parametrize("text,message,line,key", [
@@ -162,4 +162,17 @@ def test_controller_names_are_the_protocol_parameter_ids():
     block = re.search(r"typedef enum \{([^}]*)\} hil_param_id;", header).group(1)
     ids = re.findall(r"HIL_PARAM_([A-Z0-9_]+)\s*=\s*\d+", block)
     assert len(ids) > 20
-    assert sorted(name.lower() for name in ids) == sorted(CONTROLLER_PARAMS)
+    assert sorted(name.lower() for name in ids) == sorted(SETTABLE_PARAMS + READ_ONLY_PARAMS)
+
+
+def test_the_plant_alone_takes_any_controller_name_but_checks_its_form(tmp_path):
+    """plant_rt does not know the board's parameters; without the bench's list it accepts any
+    lower_snake_case name and refuses anything else, with file, line and key."""
+    ok = tmp_path / "ok.yaml"
+    ok.write_text("controller:\n  my_gain: 2.0\n")
+    assert load_profile(ok).controller == {"my_gain": 2.0}
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("controller:\n  My-Gain: 2.0\n")
+    with pytest.raises(ConfigError, match="lower_snake_case") as info:
+        load_profile(bad)
+    assert info.value.line == 2 and info.value.key == "controller.My-Gain"

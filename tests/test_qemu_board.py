@@ -1,4 +1,4 @@
-"""The Cortex-M4F port under QEMU (firmware_stub/boards/mps2_an386, hil/qemu_board.py).
+"""The Cortex-M4F port under QEMU (firmware_stub/boards/mps2_an386, hil/links/qemu.py).
 
 Each test boots QEMU once and stays within a few seconds; QEMU must be gone
 after every test, whatever the test body did.
@@ -17,8 +17,8 @@ import time
 import pytest
 import serial
 
-from hil import qemu_board
-from hil.qemu_board import BOARD_DIR, ECHO_ELF, FIRMWARE_ELF, QemuBoard, QemuBoardError, rotating_samples
+from hil.links import qemu as qemu_board
+from hil.links.qemu import BOARD_DIR, ECHO_ELF, FIRMWARE_ELF, QemuBoard, QemuBoardError, rotating_samples
 from protocol.links import open_link
 from protocol.messages import (CMD_ENABLE, PROTOCOL_VERSION, Command, ControllerState, Gates, Hello, ParamGet,
                                ParamId, ParamSet, ParamStatus, ParamValue, Role, Sample, Shutdown,
@@ -182,7 +182,7 @@ def test_target_answers_bit_identical_to_the_host_build():
     single precision on both FPUs, no libm call in the step. A difference here
     means the targets round differently, and plan-level comparisons of host and
     target runs then need a tolerance instead of equality."""
-    from hil.stub_library import StubLibraryLink
+    from hil.links.stub_library import StubLibraryLink
 
     def script():
         yield ParamSet(ParamId.TELEMETRY_DIVIDER, 1.0), ParamValue
@@ -280,7 +280,7 @@ def test_qemu_stopped_when_the_board_object_is_dropped_without_exit():
 def test_qemu_killed_with_the_python_process():
     """A Python process SIGKILLed mid-run cannot reach __exit__: QEMU must die with it."""
     script = ("import sys, time\n"
-              "from hil.qemu_board import QemuBoard, ECHO_ELF\n"
+              "from hil.links.qemu import QemuBoard, ECHO_ELF\n"
               "b = QemuBoard(ECHO_ELF, build=False); b.start()\n"
               "print(b.pid, flush=True); time.sleep(60)\n")
     child = subprocess.Popen([os.sys.executable, "-c", script], stdout=subprocess.PIPE,

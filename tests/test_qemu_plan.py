@@ -18,9 +18,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hil.outcome import Outcome
-from hil.plan import load_plan
-from hil.runner import run_plan
+from hil.plans.outcome import Outcome
+from hil.plans.format import load_plan
+from hil.run.runner import run_plan
 
 PLAN = Path(__file__).resolve().parent.parent / "test_plans" / "targets" / "qemu_speed_step.yaml"
 
@@ -52,7 +52,7 @@ def test_plan_passes_on_the_target_and_matches_the_host_bit_for_bit(tmp_path):
 
 def test_qemu_is_stopped_when_the_run_fails(tmp_path):
     """A plan that ends in TIMEOUT still stops QEMU and closes the log."""
-    from hil.plan import parse_plan
+    from hil.plans.format import parse_plan
 
     plan = parse_plan("""
 name: qemu-timeout

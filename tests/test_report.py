@@ -23,13 +23,13 @@ import numpy as np
 import pytest
 import xmlschema
 
-from hil.checks import evaluate_check
-from hil.outcome import (CheckResult, Outcome, PlanResult, StepResult, plan_outcome,
-                         skipped_remainder)
-from hil.plan import (CheckStep, CommandStep, DcLinkStep, LoadStep, MarkStep, ParamSetStep, Plan, RunStep,
+from hil.plans.checks import evaluate_check
+from hil.plans.outcome import CheckResult, Outcome, PlanResult, StepResult, plan_outcome
+from hil.run.runner import skipped_remainder
+from hil.plans.format import (CheckStep, CommandStep, DcLinkStep, LoadStep, MarkStep, ParamSetStep, Plan, RunStep,
                       WaitUntilStep, load_plan, parse_plan)
-from hil.report import junit_xml, slug, write_reports, write_summary
-from hil.signals import Signal, SignalSet
+from hil.reports.html import junit_xml, slug, write_reports, write_summary
+from hil.plans.signals import Signal, SignalSet
 
 pytest_plugins = ["pytester"]
 
@@ -284,12 +284,12 @@ def test_plan_outcome_precedence():
 
 # ------------------------------------------------------------------ pytest plugin
 
-PLUGIN_ARGS = ("-p", "hil.pytest_plugin", "-p", "no:cacheprovider")
+PLUGIN_ARGS = ("-p", "hil.run.pytest_plugin", "-p", "no:cacheprovider")
 
 
 @pytest.fixture
 def fake_runner(monkeypatch):
-    """hil.runner replaced by the model (the real runner is the lead's)."""
+    """hil.run.runner replaced by the model (the real runner is the lead's)."""
     calls: list[str] = []
 
     def run_plan(plan, link=None, mode=None, out_dir=None):
@@ -299,9 +299,9 @@ def fake_runner(monkeypatch):
             write_reports(result, signals, Path(out_dir) / slug(plan.name), plan=plan)
         return result, signals
 
-    module = types.ModuleType("hil.runner")
+    module = types.ModuleType("hil.run.runner")
     module.run_plan = run_plan
-    monkeypatch.setitem(sys.modules, "hil.runner", module)
+    monkeypatch.setitem(sys.modules, "hil.run.runner", module)
     monkeypatch.setenv("PYTEST_DISABLE_PLUGIN_AUTOLOAD", "1")
     return calls
 
@@ -365,9 +365,9 @@ def test_bench_fixture_opens_and_closes_a_bench(pytester, monkeypatch):
         def __exit__(self, *exc):
             events.append("exit")
 
-    module = types.ModuleType("hil.runner")
+    module = types.ModuleType("hil.run.runner")
     module.Bench = FakeBench
-    monkeypatch.setitem(sys.modules, "hil.runner", module)
+    monkeypatch.setitem(sys.modules, "hil.run.runner", module)
     monkeypatch.setenv("PYTEST_DISABLE_PLUGIN_AUTOLOAD", "1")
     from plant_rt.profile import default_profile_path
 
@@ -409,9 +409,9 @@ def test_plugin_reports_a_runner_failure_on_every_item(pytester, monkeypatch):
         calls.append(plan.name)
         raise RuntimeError("board on 'stub' exited with status -11 while waiting for HELLO")
 
-    module = types.ModuleType("hil.runner")
+    module = types.ModuleType("hil.run.runner")
     module.run_plan = run_plan
-    monkeypatch.setitem(sys.modules, "hil.runner", module)
+    monkeypatch.setitem(sys.modules, "hil.run.runner", module)
     monkeypatch.setenv("PYTEST_DISABLE_PLUGIN_AUTOLOAD", "1")
     plans = pytester.mkdir("test_plans")
     (plans / "step.yaml").write_text(PAPER_STEP_PLAN.read_text())

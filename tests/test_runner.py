@@ -4,9 +4,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hil.outcome import Outcome
-from hil.plan import parse_plan
-from hil.runner import run_plan
+from hil.plans.outcome import Outcome
+from hil.plans.format import parse_plan
+from hil.run.runner import run_plan
 
 
 def _run(text: str, **kwargs):
@@ -61,7 +61,7 @@ steps:
 
 
 def test_ctrl_c_aborts_with_a_safe_plant_and_a_readable_log(tmp_path):
-    from hil.log_reader import read_log
+    from hil.logs.reader import read_log
 
     calls = []
 

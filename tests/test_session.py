@@ -15,9 +15,9 @@ from mcap.reader import make_reader
 from plant_rt import load_profile
 from protocol.messages import PROTOCOL_VERSION
 
-from hil.cli import main as hil_main
-from hil.log_reader import read_log
-from hil.session import BenchSession, SessionConfig, SessionError
+from hil.cli.main import main as hil_main
+from hil.logs.reader import read_log
+from hil.session.bench_session import BenchSession, SessionConfig, SessionError
 from tests.fake_board import FakeBoard
 
 
@@ -146,7 +146,7 @@ def _free_port() -> int:
 def test_modbus_write_changes_the_plant_load_while_running():
     from pymodbus.client import ModbusTcpClient
 
-    from hil.modbus_port import HOLDING_REGISTERS, ControlMailbox, ModbusPort
+    from hil.ports.modbus import HOLDING_REGISTERS, ControlMailbox, ModbusPort
 
     port_number = _free_port()
     mailbox = ControlMailbox()

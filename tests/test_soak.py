@@ -14,9 +14,9 @@ import numpy as np
 
 from plant_rt import load_profile
 
-from hil.faults import injector
-from hil.log_reader import log_summary
-from hil.session import BenchSession, SessionConfig
+from hil.faults.injector import injector
+from hil.logs.reader import log_summary
+from hil.session.bench_session import BenchSession, SessionConfig
 from tests.test_faults_link import reconcile, stub_counters
 
 SOAK_S = 60.0

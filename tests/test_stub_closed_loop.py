@@ -10,7 +10,7 @@ import subprocess
 import numpy as np
 import pytest
 
-from hil.stub_library import STUB_DIR, StubLibraryLink
+from hil.links.stub_library import STUB_DIR, StubLibraryLink
 from plant_rt import TRUTH_FIELDS, Plant, load_profile
 from protocol.messages import Command, Fault, Gates, ParamId, ParamSet, ParamValue, Sample, Status, Telemetry
 

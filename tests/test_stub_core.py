@@ -12,7 +12,7 @@ import math
 import numpy as np
 import pytest
 
-from hil.stub_library import load_library
+from hil.links.stub_library import load_library
 
 T = 50e-6
 A_PER_COUNT = 0.01220703125
@@ -274,7 +274,7 @@ def test_magnitude_and_torque_match_reference(lib):
 
 
 def _ekf_cfg() -> EkfCfg:
-    from hil.ekf_design import default_gains
+    from hil.design.ekf import default_gains
 
     g = default_gains()
     return EkfCfg(T, g.k1, g.k2_rad_s, g.k3_rad_s)

@@ -1,4 +1,4 @@
-"""EKF gain design (hil/ekf_design.py): DLQE by the discrete Riccati equation, and
+"""EKF gain design (hil/design/ekf.py): DLQE by the discrete Riccati equation, and
 the gains the stub ships with equal the design for the documented covariances."""
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hil.ekf_design import EkfNoiseModel, default_gains, design_gains, transition_matrix
-from hil.stub_library import StubLibraryLink
+from hil.design.ekf import EkfNoiseModel, default_gains, design_gains, transition_matrix
+from hil.links.stub_library import StubLibraryLink
 from protocol.messages import ParamGet, ParamId, ParamValue
 
 REPO = Path(__file__).resolve().parent.parent
@@ -99,7 +99,7 @@ def test_shipped_defaults_equal_design_in_float32():
 
 
 def test_cli_prints_the_c_defines():
-    out = subprocess.run([sys.executable, "-m", "hil.ekf_design"], cwd=REPO, capture_output=True,
+    out = subprocess.run([sys.executable, "-m", "hil.design.ekf"], cwd=REPO, capture_output=True,
                          text=True, check=True).stdout
     printed = {name: float(value) for name, value in re.findall(r"#define (\w+) ([-0-9.eE+]+)f", out)}
     assert printed == pytest.approx(_defaults_h(), rel=1e-8)

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from hil.stub_library import EXECUTABLE_PATH, STUB_DIR
+from hil.links.stub_library import EXECUTABLE_PATH, STUB_DIR
 from protocol.codec import FrameEncoder, StreamDecoder
 from protocol.links import open_link
 from protocol.messages import (Command, Gates, Hello, ParamGet, ParamId, ParamSet, ParamValue, Role,

@@ -6,9 +6,9 @@ import math
 import numpy as np
 import pytest
 
-from hil.limits import Limits
-from hil.outcome import Outcome
-from hil.units import Quantity, UnitError, canonical, compatible, convert, wrap_angle
+from hil.plans.limits import Limits
+from hil.plans.outcome import Outcome
+from hil.plans.units import Quantity, UnitError, canonical, compatible, convert, wrap_angle
 
 
 @pytest.mark.parametrize("value, src, dst, expected", [

@@ -1,0 +1,178 @@
+"""Structure checks for configuration files, declared as JSON Schema and reported by line.
+
+One way of declaring what a file may hold, for plans and profiles alike: a JSON Schema
+(Draft 2020-12, checked by the `jsonschema` package rather than by hand-written walkers),
+built from the small blocks below or, for a parameter dataclass, derived from its `param()`
+fields by `dataclass_schema`. `SchemaChecker` runs a schema on a part of a located YAML
+document and turns the first error (the earliest in the file) into a `ConfigError` that names
+the file, the line and the key, in words a person reads ("unknown key 'speed_rmp'; did you
+mean 'speed_rpm'?").
+"""
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import typing
+from typing import Any, Iterable, Mapping
+
+import jsonschema
+
+from configfile.source import ConfigError, KeyPath, YamlDocument
+
+NUMBER = {"type": "number"}
+POSITIVE = {"type": "number", "exclusiveMinimum": 0}
+NON_NEGATIVE = {"type": "number", "minimum": 0}
+FRACTION = {"type": "number", "minimum": 0, "maximum": 1}
+POSITIVE_INT = {"type": "integer", "minimum": 1}
+BOOLEAN = {"type": "boolean"}
+NAME = {"type": "string", "minLength": 1}
+
+
+def obj(props: dict, required: Iterable[str] = (), min_props: int = 0) -> dict:
+    """A mapping with exactly these keys (unknown keys are errors)."""
+    schema: dict[str, Any] = {"type": "object", "properties": props, "additionalProperties": False}
+    if required:
+        schema["required"] = list(required)
+    if min_props:
+        schema["minProperties"] = min_props
+    return schema
+
+
+def nullable(schema: dict) -> dict:
+    """The same mapping, or nothing (an empty YAML section)."""
+    return {**schema, "type": [schema["type"], "null"]}
+
+
+def dataclass_schema(cls: type) -> dict:
+    """The JSON Schema of a parameter dataclass (configfile.fields.param fields), nested
+    dataclasses included. It checks the structure (known keys, mappings where sections are);
+    values are converted and bound-checked by configfile.fields.coerce, which also accepts
+    what YAML 1.1 leaves as text but is plainly a number (50e-6)."""
+    hints = typing.get_type_hints(cls)
+    props: dict[str, Any] = {}
+    for f in dataclasses.fields(cls):
+        hint = hints[f.name]
+        if dataclasses.is_dataclass(hint):
+            props[f.name] = nullable(dataclass_schema(hint))
+        else:
+            props[f.name] = {}
+    return obj(props)
+
+
+_TYPE_WORDS = {"number": "a number", "integer": "an integer", "string": "a string",
+               "boolean": "true or false", "object": "a mapping (key: value)", "array": "a list"}
+
+
+def python_type(value: Any) -> str:
+    """What a YAML value is, in words."""
+    if isinstance(value, bool):
+        return "a boolean"
+    if isinstance(value, (int, float)):
+        return "a number"
+    if isinstance(value, str):
+        return "a string"
+    if isinstance(value, dict):
+        return "a mapping"
+    if isinstance(value, list):
+        return "a list"
+    return "nothing" if value is None else type(value).__name__
+
+
+class SchemaChecker:
+    """Runs JSON schemas on parts of a YamlDocument and turns errors into ConfigErrors.
+
+    `pattern_words` maps a schema's regular expressions to what a person should write."""
+
+    def __init__(self, doc: YamlDocument, pattern_words: Mapping[str, str] | None = None,
+                 error=None):
+        self.doc = doc
+        self.pattern_words = dict(pattern_words or {})
+        self._error = error
+
+    def error(self, path: KeyPath, message: str) -> ConfigError:
+        if self._error is not None:
+            return self._error(path, message)
+        return self.doc.error(path, message)
+
+    def check(self, schema: dict, value: Any, path: KeyPath = ()) -> None:
+        errors = list(jsonschema.Draft202012Validator(schema).iter_errors(value))
+        if not errors:
+            return
+
+        def where(e: jsonschema.ValidationError) -> tuple[int, int]:
+            p = path + tuple(e.absolute_path)
+            return (self.doc.line_of(p) or 0, -len(p))
+        first = min(errors, key=where)
+        raise self._convert(first, path)
+
+    def _convert(self, e: jsonschema.ValidationError, base: KeyPath) -> ConfigError:
+        path = base + tuple(e.absolute_path)
+        v = e.validator
+        inst = e.instance
+        if v == "additionalProperties" and isinstance(inst, dict):
+            allowed = list(e.schema.get("properties", {}))
+            extra = [k for k in inst if k not in allowed]
+            key = extra[0] if extra else None
+            close = difflib.get_close_matches(str(key), allowed, n=1, cutoff=0.75) if key else []
+            expected = (f"; did you mean '{close[0]}'?" if close else
+                        f"; expected one of: {', '.join(allowed)}" if allowed else "")
+            if key is None:
+                return self.error(path, e.message)
+            return self.error(path + (key,), f"unknown key '{key}'{expected}")
+        if v == "required":
+            missing = [k for k in e.validator_value if not (isinstance(inst, dict) and k in inst)]
+            return self.error(path, f"missing required key '{missing[0]}'")
+        if v == "type":
+            want = e.validator_value
+            want_text = " or ".join(_TYPE_WORDS.get(w, w) for w in (want if isinstance(want, list) else [want]))
+            got = f"{python_type(inst)} ({inst!r})"
+            hint = ""
+            if isinstance(inst, str) and want in ("number", "integer") and _looks_numeric(inst):
+                hint = (" - YAML reads an exponent without a decimal point as text: "
+                        f"write {_float_hint(inst)}")
+            return self.error(path, f"expected {want_text}, got {got}{hint}")
+        if v == "enum":
+            return self.error(path, f"expected one of: {', '.join(map(str, e.validator_value))}; "
+                                    f"got {inst!r}")
+        if v == "exclusiveMinimum":
+            return self.error(path, f"must be greater than {e.validator_value}, got {inst!r}")
+        if v == "minimum":
+            return self.error(path, f"must be at least {e.validator_value}, got {inst!r}")
+        if v == "maximum":
+            return self.error(path, f"must be at most {e.validator_value}, got {inst!r}")
+        if v == "minProperties":
+            allowed = list(e.schema.get("properties", {}))
+            hint = f": {', '.join(allowed)}" if allowed else ""
+            return self.error(path, f"needs at least {e.validator_value} key(s){hint}")
+        if v == "minItems":
+            return self.error(path, f"needs at least {e.validator_value} item(s)")
+        if v == "maxItems":
+            return self.error(path, f"takes at most {e.validator_value} item(s)")
+        if v == "minLength":
+            return self.error(path, "must not be empty")
+        if v == "pattern":
+            words = self.pattern_words.get(e.validator_value, e.validator_value)
+            return self.error(path, f"{inst!r} is not a valid value (expected {words})")
+        if v == "oneOf":
+            return self.error(path, f"expected a signal name or a quantity {{value, unit}}, got "
+                                    f"{python_type(inst)} ({inst!r})")
+        return self.error(path, e.message)
+
+
+def _looks_numeric(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _float_hint(text: str) -> str:
+    mant, _, exp = text.lower().partition("e")
+    if "." not in mant:
+        mant += ".0"
+    return f"{mant}e{exp}" if exp else mant
+
+
+__all__ = ["NUMBER", "POSITIVE", "NON_NEGATIVE", "FRACTION", "POSITIVE_INT", "BOOLEAN", "NAME",
+           "obj", "nullable", "dataclass_schema", "python_type", "SchemaChecker"]

@@ -1,0 +1,149 @@
+"""The ``hil`` command line.
+
+Exit codes: 0 every plan passed, 1 a plan failed (FAIL or MARGINAL-free FAIL,
+TIMEOUT), 2 an error (bad input, the bench or the board failed, ABORTED).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from hil.links.registry import LINK_CHOICES
+
+EXIT_PASS, EXIT_FAIL, EXIT_ERROR = 0, 1, 2
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="hil", description="hil-bench: hardware-in-the-loop test bench for motor-controller boards.")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    run = sub.add_parser("run", help="run test plans against a board",
+                         description="Run YAML test plans (files, or directories of *.yaml) against a "
+                                     "board and write reports and MCAP logs into --out.")
+    run.add_argument("plans", nargs="+", type=Path, help="plan files or directories")
+    run.add_argument("--link", help=f"board link (default: the plan's, else stub): {', '.join(LINK_CHOICES)}")
+    run.add_argument("--mode", choices=("lockstep", "realtime"), help="clock (default: the plan's, else lockstep)")
+    run.add_argument("--out", type=Path, default=Path("out"), help="output directory (default: out)")
+    run.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
+    run.add_argument("--modbus", metavar="[HOST:]PORT", help="serve the Modbus control port while running")
+    run.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+    serve = sub.add_parser("serve", help="run the plant alone for an external board",
+                           description="Run the plant in lockstep against a board until Ctrl-C (or "
+                                       "--duration), optionally with the Modbus control port.")
+    serve.add_argument("--link", default="stub", help=f"board link: {', '.join(LINK_CHOICES)}")
+    serve.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep")
+    serve.add_argument("--profile", type=Path, help="bench profile YAML (default: the paper's)")
+    serve.add_argument("--modbus", metavar="[HOST:]PORT", default="127.0.0.1:5020",
+                       help="Modbus TCP control port (default 127.0.0.1:5020; 'off' to disable)")
+    serve.add_argument("--duration", type=float, help="simulated seconds to run (default: until Ctrl-C)")
+    serve.add_argument("--log", type=Path, help="MCAP log path")
+    serve.add_argument("--speed-rpm", type=float, default=0.0,
+                       help="speed reference sent to the board (default 0)")
+    serve.add_argument("--speed-source", choices=("encoder", "conventional", "ekf"), default="encoder",
+                       help="speed feedback the board closes its loop on (default encoder)")
+    serve.add_argument("--enable", action="store_true",
+                       help="enable the board at start (otherwise: Modbus run bit)")
+
+    log = sub.add_parser("log", help="inspect an MCAP log", description="Inspect an MCAP log of a run.")
+    log_sub = log.add_subparsers(dest="log_command", required=True, metavar="ACTION")
+    info = log_sub.add_parser("info", help="channels, message counts, duration, metadata")
+    info.add_argument("file", type=Path)
+    info.add_argument("--json", action="store_true", help="print JSON")
+    plot = log_sub.add_parser("plot", help="PNG plot of signals over a time window")
+    plot.add_argument("file", type=Path)
+    plot.add_argument("signals", nargs="+", help="e.g. plant.speed_rpm ctrl.speed_ekf_rad_s /plant/truth:i_a")
+    plot.add_argument("--out", type=Path, default=Path("plot.png"))
+    plot.add_argument("--from", dest="t0", type=float, help="start time, s")
+    plot.add_argument("--to", dest="t1", type=float, help="end time, s")
+    export = log_sub.add_parser("export", help="CSV export of channels")
+    export.add_argument("file", type=Path)
+    export.add_argument("channels", nargs="+", help="topics, e.g. /plant/truth")
+    export.add_argument("--out", type=Path, default=Path("export.csv"))
+    export.add_argument("--from", dest="t0", type=float)
+    export.add_argument("--to", dest="t1", type=float)
+
+    bench = sub.add_parser("bench", help="print every benchmark figure as JSON")
+    bench.add_argument("names", nargs="*", help="benchmarks (default all)")
+    bench.add_argument("--quick", action="store_true", help="fewer repetitions")
+
+    plans = sub.add_parser("plans", help="list and validate plans")
+    plans.add_argument("paths", nargs="*", type=Path, default=[Path("test_plans")])
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    try:
+        if args.command == "run":
+            from hil.run.runner import run_command
+
+            return run_command(args)
+        if args.command == "serve":
+            from hil.cli.serve import serve_command
+
+            return serve_command(args)
+        if args.command == "log":
+            return _log_command(args)
+        if args.command == "bench":
+            # The benchmarks use the bench, not the other way round: run them as their own
+            # program (python -m bench) so hil imports nothing from bench/.
+            import subprocess
+
+            argv = [sys.executable, "-m", "bench", *args.names] + (["--quick"] if args.quick else [])
+            return subprocess.call(argv)
+        if args.command == "plans":
+            return _plans_command(args)
+    except KeyboardInterrupt:
+        print("hil: interrupted", file=sys.stderr)
+        return EXIT_ERROR
+    except Exception as exc:  # noqa: BLE001 - every error leaves with its message and code 2
+        from configfile.source import ConfigError
+
+        if isinstance(exc, (ConfigError, OSError, ValueError, RuntimeError)):
+            print(f"hil {args.command}: error: {exc}", file=sys.stderr)
+            return EXIT_ERROR
+        raise
+    return EXIT_ERROR
+
+
+def _log_command(args) -> int:
+    from hil.logs import commands as log_commands
+
+    if args.log_command == "info":
+        summary = log_commands.log_info(args.file)
+        if args.json:
+            print(json.dumps(summary, indent=2, default=str))
+        else:
+            print(log_commands.format_info(summary))
+    elif args.log_command == "plot":
+        log_commands.log_plot(args.file, args.signals, args.out, t0=args.t0, t1=args.t1)
+        print(f"wrote {args.out}")
+    elif args.log_command == "export":
+        log_commands.log_export(args.file, args.channels, args.out, t0=args.t0, t1=args.t1)
+        print(f"wrote {args.out}")
+    return EXIT_PASS
+
+
+def _plans_command(args) -> int:
+    from hil.plans.format import load_plan
+    from hil.run.runner import expand_plan_paths
+    from configfile.source import ConfigError
+
+    worst = EXIT_PASS
+    for path in expand_plan_paths(args.paths):
+        try:
+            plan = load_plan(path)
+        except ConfigError as exc:
+            print(f"INVALID  {exc}")
+            worst = EXIT_ERROR
+            continue
+        print(f"ok       {path}: {plan.name} ({len(plan.steps)} steps) - {plan.description.splitlines()[0] if plan.description else ''}")
+    return worst
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,613 @@
+"""MCAP run log: protobuf channels packed by hand for the full-rate data, JSON for the rare.
+
+Why not ``mcap.writer.Writer.add_message``: it builds a dataclass and a dozen small
+struct.pack calls per message (about 4 us for 20 doubles, bench/mcap_logging.py). Here a
+full-rate message is one precompiled ``struct.Struct.pack_into`` of the whole MCAP
+Message record, protobuf payload included, into the preallocated open chunk (about
+1.4 us); the chunk's message indexes, the metadata, the summary and the footer are
+written with the mcap package's record classes. Files read back with the mcap package's
+readers (CRCs validated) and open in Foxglove.
+
+Protobuf wire format used (only fixed-width scalar fields, none omitted, so the layout
+of every message of a channel is constant): each field is its tag varint
+(``field_number << 3 | wire_type``, one byte up to field 15, two bytes up to 2047)
+followed by the little-endian value (wire type 1 = 8 bytes, 5 = 4 bytes).
+
+Crash safety: each finished chunk is handed to the kernel with one write() before the
+next message is accepted, so a SIGKILL loses at most the open chunk (see
+docs/logging.md); an unclosed file is read by :mod:`hil.logs.reader`. Not thread-safe:
+one thread (the session's) writes.
+"""
+from __future__ import annotations
+
+import itertools
+import json
+import math
+import os
+import struct
+import zlib
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from google.protobuf import descriptor_pb2
+from mcap.data_stream import RecordBuilder
+from mcap.opcode import Opcode
+from mcap.records import (
+    Attachment,
+    AttachmentIndex,
+    Channel,
+    ChunkIndex,
+    DataEnd,
+    Header,
+    Metadata,
+    MetadataIndex,
+    Schema,
+    Statistics,
+    SummaryOffset,
+)
+
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+LIBRARY = "hil-bench mcap_log"
+DEFAULT_CHUNK_SIZE = 64 * 1024
+MAX_CHUNK_SIZE = 64 * 1024 * 1024
+
+# protobuf scalar type name -> (FieldDescriptorProto type, wire type, struct code)
+FIXED_TYPES: dict[str, tuple[int, int, str]] = {
+    "double": (descriptor_pb2.FieldDescriptorProto.TYPE_DOUBLE, 1, "d"),
+    "float": (descriptor_pb2.FieldDescriptorProto.TYPE_FLOAT, 5, "f"),
+    "fixed32": (descriptor_pb2.FieldDescriptorProto.TYPE_FIXED32, 5, "I"),
+    "sfixed32": (descriptor_pb2.FieldDescriptorProto.TYPE_SFIXED32, 5, "i"),
+    "fixed64": (descriptor_pb2.FieldDescriptorProto.TYPE_FIXED64, 1, "Q"),
+    "sfixed64": (descriptor_pb2.FieldDescriptorProto.TYPE_SFIXED64, 1, "q"),
+}
+
+# Message record prefix: opcode, record length, channel id, sequence, log time, publish time.
+_MESSAGE_PREFIX = "<BQHIQQ"
+_MESSAGE_PREFIX_LEN = struct.calcsize(_MESSAGE_PREFIX)  # 31 bytes, of which 22 are the body
+_MESSAGE_PREFIX_STRUCT = struct.Struct(_MESSAGE_PREFIX)
+_RECORD_HEAD = struct.Struct("<BQ")
+_BYTES_COUNT_TAG = (1 << 3) | 5  # field 1 `count`, fixed32
+_BYTES_DATA_TAG = (2 << 3) | 2  # field 2 `data`, length-delimited
+_BYTES_HEAD = struct.Struct("<BIB")  # count tag, count, data tag (its length varint follows)
+
+
+def tag_varint(field_number: int, wire_type: int) -> bytes:
+    """Protobuf tag as a varint; constant per field, so it is packed once per message layout."""
+    value = (field_number << 3) | wire_type
+    return _varint(value)
+
+
+def _varint(value: int) -> bytes:
+    out = bytearray()
+    while True:
+        byte = value & 0x7F
+        value >>= 7
+        if value:
+            out.append(byte | 0x80)
+        else:
+            out.append(byte)
+            return bytes(out)
+
+
+def _split_name(message_name: str) -> tuple[str, str]:
+    package, _, short = message_name.rpartition(".")
+    if not short.isidentifier() or (package and not all(p.isidentifier() for p in package.split("."))):
+        raise ValueError(f"protobuf message name {message_name!r} is not a dotted identifier")
+    return package, short
+
+
+def fixed_descriptor_set(message_name: str, fields: list[tuple[str, str]]) -> bytes:
+    """Serialized FileDescriptorSet of one proto3 message of fixed-width scalar fields.
+
+    Field numbers are 1..n in the order given; this order is also the wire order.
+    """
+    package, short = _split_name(message_name)
+    file = descriptor_pb2.FileDescriptorProto(
+        name=message_name.replace(".", "/") + ".proto", package=package, syntax="proto3")
+    msg = file.message_type.add(name=short)
+    for number, (name, type_name) in enumerate(fields, start=1):
+        msg.field.add(name=name, number=number, type=FIXED_TYPES[type_name][0],
+                      label=descriptor_pb2.FieldDescriptorProto.LABEL_OPTIONAL)
+    return descriptor_pb2.FileDescriptorSet(file=[file]).SerializeToString()
+
+
+def bytes_descriptor_set(message_name: str) -> bytes:
+    """FileDescriptorSet of a batch message: `fixed32 count = 1; bytes data = 2;`."""
+    package, short = _split_name(message_name)
+    file = descriptor_pb2.FileDescriptorProto(
+        name=message_name.replace(".", "/") + ".proto", package=package, syntax="proto3")
+    msg = file.message_type.add(name=short)
+    f = descriptor_pb2.FieldDescriptorProto
+    msg.field.add(name="count", number=1, type=f.TYPE_FIXED32, label=f.LABEL_OPTIONAL)
+    msg.field.add(name="data", number=2, type=f.TYPE_BYTES, label=f.LABEL_OPTIONAL)
+    return descriptor_pb2.FileDescriptorSet(file=[file]).SerializeToString()
+
+
+def json_schema_of(obj: Any) -> dict:
+    """A JSON Schema describing `obj`'s shape, loose enough for the topic's later messages:
+    properties are not required, every number is "number" (a 0 now may be 0.5 later) and
+    a null says nothing about the type."""
+    if isinstance(obj, bool):
+        return {"type": "boolean"}
+    if isinstance(obj, (int, float)):
+        return {"type": "number"}
+    if isinstance(obj, str):
+        return {"type": "string"}
+    if obj is None:
+        return {}
+    if isinstance(obj, Mapping):
+        return {"type": "object", "properties": {str(k): json_schema_of(v) for k, v in obj.items()}}
+    if isinstance(obj, (list, tuple)):
+        return {"type": "array", "items": json_schema_of(obj[0]) if obj else {}}
+    if hasattr(obj, "item") or hasattr(obj, "tolist"):  # numpy scalar or array
+        return json_schema_of(_json_default(obj))
+    return {}
+
+
+def _json_default(obj: Any) -> Any:
+    if hasattr(obj, "tolist"):  # numpy scalars and arrays
+        return obj.tolist()
+    if isinstance(obj, (bytes, bytearray)):
+        return obj.hex()
+    if isinstance(obj, Path):
+        return str(obj)
+    raise TypeError(f"{type(obj).__name__} is not JSON serializable")
+
+
+def _finite(obj: Any) -> Any:
+    """JSON has no NaN or infinity: Foxglove and json parsers reject them, so they become null."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, Mapping):
+        return {k: _finite(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_finite(v) for v in obj]
+    if hasattr(obj, "tolist"):
+        return _finite(obj.tolist())
+    return obj
+
+
+def _string_map(name: str, data: Mapping[str, Any]) -> dict[str, str]:
+    """MCAP metadata is string to string: scalars become str, structures JSON."""
+    if not isinstance(data, Mapping):
+        raise TypeError(f"metadata {name!r} must be a mapping of names to values, not {type(data).__name__}")
+    out = {}
+    for key, value in data.items():
+        if isinstance(value, str):
+            out[str(key)] = value
+        elif isinstance(value, (Mapping, list, tuple)):
+            out[str(key)] = json.dumps(_finite(value), default=_json_default, sort_keys=True)
+        else:
+            out[str(key)] = str(value)
+    return out
+
+
+class _OpenChunk:
+    """The chunk being filled: a preallocated buffer and its fill level, shared by all
+    channels. Records are packed into it in place (no per-message bytes object, no
+    regrowth after each chunk)."""
+
+    __slots__ = ("buf", "fill", "limit")
+
+    def __init__(self, limit: int):
+        self.limit = limit
+        self.buf = bytearray(limit + _FIXED_RECORD_MAX)
+        self.fill = 0
+
+
+_FIXED_RECORD_MAX = 64 * 1024
+
+
+class FixedChannel:
+    """A protobuf channel whose every message has the same fixed-width layout."""
+
+    __slots__ = ("topic", "message_name", "field_names", "channel_id", "record_size", "_log", "_args",
+                 "_pack_into", "_chunk", "_index")
+
+    def __init__(self, log: McapLog, channel_id: int, topic: str, message_name: str,
+                 fields: list[tuple[str, str]]):
+        self._log = log
+        self.topic = topic
+        self.message_name = message_name
+        self.channel_id = channel_id
+        self.field_names = tuple(name for name, _ in fields)
+        fmt = _MESSAGE_PREFIX
+        payload = 0
+        tail: list[int | float] = []
+        for number, (_, type_name) in enumerate(fields, start=1):
+            _, wire, code = FIXED_TYPES[type_name]
+            tag = tag_varint(number, wire)
+            fmt += ("B" if len(tag) == 1 else "H") + code
+            tail += [int.from_bytes(tag, "little"), 0]
+            payload += len(tag) + struct.calcsize("<" + code)
+        self.record_size = _MESSAGE_PREFIX_LEN + payload
+        if self.record_size > _FIXED_RECORD_MAX:
+            raise ValueError(f"{topic}: {len(fields)} fields make a {self.record_size}-byte message; "
+                             f"at most {_FIXED_RECORD_MAX} bytes")
+        self._pack_into = struct.Struct(fmt).pack_into
+        self._chunk = log._open
+        # pack_into(buffer, offset, opcode, length, channel, sequence, log time, publish time, tag, value, ...)
+        self._args = [self._chunk.buf, 0, Opcode.MESSAGE, self.record_size - 9, channel_id, 0, 0, 0] + tail
+        self._index: list[tuple[int, int]] = []  # (log time, offset in chunk) for the MessageIndex
+
+    def write(self, log_time_ns: int, *values: float | int) -> None:
+        """Log one message; `values` in the declared field order."""
+        chunk = self._chunk
+        pos = chunk.fill
+        args = self._args
+        args[1] = pos
+        args[6] = args[7] = log_time_ns
+        try:
+            args[9::2] = values
+            self._pack_into(*args)
+        except (ValueError, struct.error, TypeError) as exc:
+            raise ValueError(self._bad_values(values, exc)) from None
+        end = pos + self.record_size
+        chunk.fill = end
+        self._index.append((log_time_ns, pos))
+        if end >= chunk.limit:
+            self._log._finish_chunk()
+
+    def _bad_values(self, values: tuple, exc: Exception) -> str:
+        if len(values) != len(self.field_names):
+            return (f"{self.topic}: expected {len(self.field_names)} values "
+                    f"({', '.join(self.field_names)}), got {len(values)}")
+        return f"{self.topic}: a value does not fit its field type ({exc}); values {values!r}"
+
+
+class _VariableChannel:
+    __slots__ = ("topic", "channel_id", "_log", "_chunk", "_index")
+
+    def __init__(self, log: McapLog, channel_id: int, topic: str):
+        self._log = log
+        self.topic = topic
+        self.channel_id = channel_id
+        self._chunk = log._open
+        self._index: list[tuple[int, int]] = []
+
+    def _append(self, log_time_ns: int, payload: bytes) -> None:
+        chunk = self._chunk
+        pos = chunk.fill
+        end = pos + _MESSAGE_PREFIX_LEN + len(payload)
+        # slice assignment writes in place, growing the buffer only for an outsized message
+        chunk.buf[pos:end] = _MESSAGE_PREFIX_STRUCT.pack(
+            Opcode.MESSAGE, end - pos - 9, self.channel_id, 0, log_time_ns, log_time_ns) + payload
+        chunk.fill = end
+        self._index.append((log_time_ns, pos))
+        if end >= chunk.limit:
+            self._log._finish_chunk()
+
+
+class BytesChannel(_VariableChannel):
+    """A protobuf channel of batches: `count` items (e.g. raw frames) concatenated in `data`."""
+
+    __slots__ = ("message_name",)
+
+    def __init__(self, log: McapLog, channel_id: int, topic: str, message_name: str):
+        super().__init__(log, channel_id, topic)
+        self.message_name = message_name
+
+    def write(self, log_time_ns: int, data: bytes, count: int) -> None:
+        try:
+            head = _BYTES_HEAD.pack(_BYTES_COUNT_TAG, count, _BYTES_DATA_TAG)
+        except struct.error:
+            raise ValueError(f"{self.topic}: count {count!r} is not a 32-bit unsigned integer") from None
+        self._append(log_time_ns, b"".join((head, _varint(len(data)), data)))
+
+
+class JsonChannel(_VariableChannel):
+    __slots__ = ("schema_name",)
+
+    def __init__(self, log: McapLog, channel_id: int, topic: str, schema_name: str):
+        super().__init__(log, channel_id, topic)
+        self.schema_name = schema_name
+
+    def write(self, log_time_ns: int, obj: Mapping[str, Any]) -> None:
+        try:
+            text = json.dumps(obj, separators=(",", ":"), allow_nan=False, default=_json_default)
+        except ValueError:
+            text = json.dumps(_finite(obj), separators=(",", ":"), allow_nan=False, default=_json_default)
+        self._append(log_time_ns, text.encode())
+
+
+class McapLog:
+    """Writer of one run's MCAP file.
+
+    ``compression``: "lz4" (default: nearly free), "zstd" (level ``zstd_level``: smaller
+    files, about 0.5 us a period more) or "none".
+    ``chunk_size``: the open chunk is compressed and written once it holds this many
+    bytes; a SIGKILL loses at most that much uncompressed data.
+    """
+
+    def __init__(self, path: str | os.PathLike, metadata: Mapping[str, Mapping[str, Any]] | None = None,
+                 chunk_size: int = DEFAULT_CHUNK_SIZE, compression: str = "lz4", zstd_level: int = 1):
+        self.path = Path(path)
+        if not 1024 <= chunk_size <= MAX_CHUNK_SIZE:
+            raise ValueError(f"chunk_size {chunk_size}: use 1 KiB to {MAX_CHUNK_SIZE >> 20} MiB "
+                             f"(the open chunk is preallocated)")
+        self.chunk_size = int(chunk_size)
+        self.compression = compression
+        if compression == "zstd":
+            import zstandard
+            self._compress = zstandard.ZstdCompressor(level=zstd_level).compress
+        elif compression == "lz4":
+            import lz4.frame
+            self._compress = lz4.frame.compress
+        elif compression in ("none", ""):
+            self.compression = ""
+            self._compress = None
+        else:
+            raise ValueError(f"compression {compression!r}: use 'zstd', 'lz4' or 'none'")
+        self._open = _OpenChunk(self.chunk_size)
+        self._channels: list[FixedChannel | BytesChannel | JsonChannel] = []
+        self._by_topic: dict[str, FixedChannel | BytesChannel | JsonChannel] = {}
+        self._schemas: dict[tuple[str, str, bytes], Schema] = {}
+        self._channel_records: list[Channel] = []
+        self._chunk_indexes: list[ChunkIndex] = []
+        self._metadata_indexes: list[MetadataIndex] = []
+        self._attachment_indexes: list[AttachmentIndex] = []
+        self._message_counts: dict[int, int] = {}
+        self._time_range: tuple[int, int] | None = None
+        self._metadata_count = 0
+        self._closed = False
+        self._failed = False
+        self._pos = 0
+        self._crc = 0
+        try:
+            self._file = open(self.path, "wb", buffering=0)
+        except OSError as exc:
+            raise type(exc)(exc.errno, f"cannot create MCAP log: {exc.strerror}", str(self.path)) from None
+        try:
+            rb = RecordBuilder()
+            Header(profile="", library=LIBRARY).write(rb)
+            self._write(MCAP_MAGIC + rb.end())
+            for name, data in (metadata or {}).items():
+                self.add_metadata(name, data)
+        except BaseException:
+            self._release()
+            raise
+
+    # -- channels -------------------------------------------------------------------------
+    def add_fixed_channel(self, topic: str, message_name: str, fields: list[tuple[str, str]]) -> FixedChannel:
+        """A full-rate protobuf channel; ``fields`` are (name, type) with type in FIXED_TYPES."""
+        fields = [(str(n), str(t)) for n, t in fields]
+        if not fields:
+            raise ValueError(f"{topic}: a fixed channel needs at least one field")
+        for name, type_name in fields:
+            if type_name not in FIXED_TYPES:
+                raise ValueError(f"{topic}: field {name!r} has type {type_name!r}; "
+                                 f"fixed-width types are {', '.join(FIXED_TYPES)}")
+            if not name.isidentifier():
+                raise ValueError(f"{topic}: field name {name!r} is not an identifier")
+        names = [n for n, _ in fields]
+        if len(set(names)) != len(names):
+            raise ValueError(f"{topic}: duplicate field names in {names}")
+        schema_id = self._schema(message_name, "protobuf", fixed_descriptor_set(message_name, fields))
+        channel_id = self._channel(topic, "protobuf", schema_id)
+        return self._register(FixedChannel(self, channel_id, topic, message_name, fields))
+
+    def add_bytes_channel(self, topic: str, message_name: str) -> BytesChannel:
+        """A protobuf channel of batches of raw bytes (e.g. one message per N periods of frames)."""
+        schema_id = self._schema(message_name, "protobuf", bytes_descriptor_set(message_name))
+        channel_id = self._channel(topic, "protobuf", schema_id)
+        return self._register(BytesChannel(self, channel_id, topic, message_name))
+
+    def add_json_channel(self, topic: str, schema: Mapping[str, Any] | None = None,
+                         schema_name: str | None = None) -> JsonChannel:
+        """A JSON channel for rare messages; ``schema`` is a JSON Schema (default: any object)."""
+        schema = dict(schema) if schema is not None else {"type": "object"}
+        name = schema_name or "hil" + topic.replace("/", ".")
+        schema_id = self._schema(name, "jsonschema", json.dumps(schema, sort_keys=True).encode())
+        channel_id = self._channel(topic, "json", schema_id)
+        return self._register(JsonChannel(self, channel_id, topic, name))
+
+    def write_json(self, topic: str, log_time_ns: int, obj: Mapping[str, Any]) -> None:
+        """Log a JSON message; the topic's channel and schema are made on first use from `obj`."""
+        channel = self._by_topic.get(topic)
+        if channel is None:
+            channel = self.add_json_channel(topic, json_schema_of(obj))
+        elif not isinstance(channel, JsonChannel):
+            raise ValueError(f"{topic} is a protobuf channel; write_json needs a JSON topic")
+        channel.write(log_time_ns, obj)
+
+    def channel(self, topic: str) -> FixedChannel | BytesChannel | JsonChannel:
+        return self._by_topic[topic]
+
+    # -- metadata and attachments -----------------------------------------------------------
+    def add_metadata(self, name: str, data: Mapping[str, Any]) -> None:
+        self._check_open()
+        rb = RecordBuilder()
+        Metadata(name=str(name), metadata=_string_map(name, data)).write(rb)
+        record = rb.end()
+        self._metadata_indexes.append(MetadataIndex(offset=self._pos, length=len(record), name=str(name)))
+        self._metadata_count += 1
+        self._write(record)
+
+    def add_attachment(self, name: str, data: bytes, media_type: str = "application/octet-stream",
+                       log_time_ns: int = 0) -> None:
+        self._check_open()
+        rb = RecordBuilder()
+        Attachment(create_time=0, log_time=log_time_ns, name=str(name), media_type=media_type,
+                   data=bytes(data)).write(rb)
+        record = rb.end()
+        self._attachment_indexes.append(AttachmentIndex(
+            offset=self._pos, length=len(record), log_time=log_time_ns, create_time=0,
+            data_size=len(data), name=str(name), media_type=media_type))
+        self._write(record)
+
+    # -- life cycle --------------------------------------------------------------------------
+    def flush(self) -> None:
+        """Write the open chunk now, so that everything logged so far survives a crash."""
+        self._check_open()
+        self._finish_chunk()
+
+    def close(self) -> None:
+        """Finish the file (chunk, indexes, summary, footer). Idempotent. After a failed
+        write it only releases the file, so it never hides the first error."""
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            if not self._failed:
+                self._finish_chunk()
+                self._write_summary()
+        finally:
+            self._release()
+
+    def __enter__(self) -> McapLog:
+        return self
+
+    def __exit__(self, *exc_info) -> None:
+        self.close()
+
+    def __del__(self):
+        if not getattr(self, "_closed", True):
+            self._release()
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+    # -- internals -----------------------------------------------------------------------------
+    def _release(self) -> None:
+        self._closed = True
+        self._open.limit = -1  # a write after this reaches _finish_chunk, which raises
+        file = getattr(self, "_file", None)
+        if file is not None and not file.closed:
+            file.close()
+
+    def _check_open(self) -> None:
+        if self._closed:
+            raise ValueError(f"MCAP log {self.path} is closed")
+        if self._failed:
+            raise OSError(f"MCAP log {self.path} failed earlier; nothing more is written")
+
+    def _write(self, data: bytes | bytearray | memoryview) -> None:
+        try:
+            view = memoryview(data)
+            while view:
+                n = self._file.write(view)
+                view = view[n:]
+        except OSError as exc:
+            self._failed = True
+            self._open.limit = -1
+            raise type(exc)(exc.errno, f"cannot write MCAP log: {exc.strerror}", str(self.path)) from None
+        self._crc = zlib.crc32(data, self._crc)
+        self._pos += len(data)
+
+    def _schema(self, name: str, encoding: str, data: bytes) -> int:
+        key = (name, encoding, data)
+        schema = self._schemas.get(key)
+        if schema is None:
+            self._check_open()
+            schema = Schema(id=len(self._schemas) + 1, name=name, encoding=encoding, data=data)
+            self._schemas[key] = schema
+            rb = RecordBuilder()
+            schema.write(rb)
+            self._write(rb.end())
+        return schema.id
+
+    def _channel(self, topic: str, message_encoding: str, schema_id: int) -> int:
+        self._check_open()
+        if topic in self._by_topic:
+            raise ValueError(f"{self.path}: topic {topic} already has a channel")
+        channel = Channel(id=len(self._channel_records) + 1, topic=topic,
+                          message_encoding=message_encoding, schema_id=schema_id, metadata={})
+        rb = RecordBuilder()
+        channel.write(rb)
+        self._write(rb.end())
+        self._channel_records.append(channel)
+        return channel.id
+
+    def _register(self, channel):
+        self._channels.append(channel)
+        self._by_topic[channel.topic] = channel
+        return channel
+
+    def _finish_chunk(self) -> None:
+        """Compress the open chunk and write it with one message index per channel."""
+        if self._failed:
+            raise OSError(f"MCAP log {self.path} failed earlier; nothing more is written")
+        if self._file.closed:
+            raise ValueError(f"MCAP log {self.path} is closed")
+        chunk = self._open
+        fill = chunk.fill
+        if not fill:
+            return
+        active = [c for c in self._channels if c._index]
+        start = min(min(c._index)[0] for c in active)
+        end = max(max(c._index)[0] for c in active)
+        with memoryview(chunk.buf) as whole, whole[:fill] as raw:
+            data = self._compress(raw) if self._compress else bytes(raw)
+            raw_crc = zlib.crc32(raw)
+        compression = self.compression.encode()
+        body_head = struct.pack(f"<QQQII{len(compression)}sQ", start, end, fill, raw_crc,
+                                len(compression), compression, len(data))
+        chunk_record = _RECORD_HEAD.pack(Opcode.CHUNK, len(body_head) + len(data)) + body_head
+        chunk_start = self._pos
+        chunk_length = len(chunk_record) + len(data)
+        parts = [chunk_record, data]
+        offsets = {}
+        index_pos = chunk_start + chunk_length
+        for c in active:
+            idx = c._index
+            n = len(idx)
+            offsets[c.channel_id] = index_pos
+            record = (_RECORD_HEAD.pack(Opcode.MESSAGE_INDEX, 6 + 16 * n)
+                      + struct.pack(f"<HI{2 * n}Q", c.channel_id, 16 * n, *itertools.chain.from_iterable(idx)))
+            parts.append(record)
+            index_pos += len(record)
+            self._message_counts[c.channel_id] = self._message_counts.get(c.channel_id, 0) + n
+            idx.clear()
+        chunk.fill = 0
+        self._write(b"".join(parts))
+        self._chunk_indexes.append(ChunkIndex(
+            message_start_time=start, message_end_time=end, chunk_start_offset=chunk_start,
+            chunk_length=chunk_length, message_index_offsets=offsets,
+            message_index_length=index_pos - chunk_start - chunk_length,
+            compression=self.compression, compressed_size=len(data), uncompressed_size=fill))
+        if self._time_range is None:
+            self._time_range = (start, end)
+        else:
+            self._time_range = (min(start, self._time_range[0]), max(end, self._time_range[1]))
+
+    def _write_summary(self) -> None:
+        rb = RecordBuilder()
+        DataEnd(data_section_crc=0).write(rb)  # CRC of the data section, patched below
+        data_end = bytearray(rb.end())
+        struct.pack_into("<I", data_end, 9, self._crc)
+        self._write(bytes(data_end))
+
+        summary_start = self._pos
+        sb = RecordBuilder()
+        offsets: list[SummaryOffset] = []
+
+        def group(opcode: Opcode, records) -> None:
+            begin = sb.count
+            for record in records:
+                record.write(sb)
+            if sb.count > begin:
+                offsets.append(SummaryOffset(group_opcode=opcode, group_start=summary_start + begin,
+                                             group_length=sb.count - begin))
+
+        start, end = self._time_range or (0, 0)
+        stats = Statistics(
+            message_count=sum(self._message_counts.values()), schema_count=len(self._schemas),
+            channel_count=len(self._channel_records), attachment_count=len(self._attachment_indexes),
+            metadata_count=self._metadata_count, chunk_count=len(self._chunk_indexes),
+            message_start_time=start, message_end_time=end,
+            channel_message_counts=dict(self._message_counts))
+        group(Opcode.SCHEMA, self._schemas.values())
+        group(Opcode.CHANNEL, self._channel_records)
+        group(Opcode.STATISTICS, [stats])
+        group(Opcode.CHUNK_INDEX, self._chunk_indexes)
+        group(Opcode.ATTACHMENT_INDEX, self._attachment_indexes)
+        group(Opcode.METADATA_INDEX, self._metadata_indexes)
+        summary_offset_start = summary_start + sb.count
+        for offset in offsets:
+            offset.write(sb)
+        summary = sb.end()
+        footer_head = struct.pack("<BQQQ", Opcode.FOOTER, 20, summary_start, summary_offset_start)
+        summary_crc = zlib.crc32(footer_head, zlib.crc32(summary))
+        self._write(summary + footer_head + struct.pack("<I", summary_crc) + MCAP_MAGIC)

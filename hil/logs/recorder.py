@@ -1,0 +1,151 @@
+"""Keeps every period's plant truth, sensor values, telemetry and commands.
+
+In memory as plain lists (an append costs tens of nanoseconds) for the
+checks at the end of a run, and in the MCAP log as it happens. Signals are
+aligned on the sample instant t_k = k * T: the plant truth recorded for period
+k is the state the sensors sampled, and the telemetry of period k is what the
+board computed from that sample.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from plant_rt import TRUTH_FIELDS
+
+SENSOR_FIELDS = ("adc_i1", "adc_i2", "adc_vdc", "encoder", "status")
+TELEMETRY_FIELDS = ("sector", "speed_source", "state", "gates", "speed_feedback_rad_s",
+                    "speed_encoder_rad_s", "speed_raw_rad_s", "speed_lpf_rad_s", "speed_ekf_rad_s",
+                    "flux_angle_rad", "ekf_angle_rad", "flux_mag_wb", "torque_est_nm",
+                    "torque_ref_nm", "rotor_pos_conv_rad", "rotor_pos_ekf_rad")
+COMMAND_FIELDS = ("enable", "speed_source", "speed_ref_rpm", "torque_mode", "torque_ref_nm",
+                  "flux_ref_wb")
+#: Step signals every run has (0 until they change): the board's latched fault code (FAULT,
+#: STATUS) and the Modbus bits of the injected faults in effect (hil/faults/injector.py).
+STEP_SIGNALS = ("ctrl.fault_code", "fault.active_bits")
+
+
+def unit_of(field: str) -> str:
+    """Unit of a logged field, from the naming convention (units in names)."""
+    for suffix, unit in (("_rad_s", "rad/s"), ("_rpm", "rpm"), ("_rad", "rad"), ("_wb", "Wb"),
+                         ("_nm", "Nm"), ("_s", "s"), ("_v", "V"), ("_a", "A")):
+        if field.endswith(suffix):
+            return unit
+    if field.startswith(("i_", "adc_i")):
+        return "A" if field.startswith("i_") else ""
+    if field.startswith("psi_"):
+        return "Wb"
+    if field.startswith(("u_", "v_")):
+        return "V"
+    return ""
+
+
+class Recorder:
+    """Per-period rows, optionally mirrored to an McapLog."""
+
+    def __init__(self, period_s: float):
+        self.period_s = period_s
+        self.periods: list[int] = []
+        self.truth_rows: list[tuple] = []
+        self.sensor_rows: list[tuple] = []
+        self.telemetry_rows: list[tuple] = []
+        self.command_rows: list[tuple] = []
+        # Step signals that change now and then (board fault code, injected faults):
+        # name -> [(period, value)], held until the next change.
+        self.step_rows: dict[str, list[tuple[int, float]]] = {name: [] for name in STEP_SIGNALS}
+        self._log = None
+        self._truth_ch = self._sensor_ch = self._telemetry_ch = None
+        self._frames_ch = None
+
+    def attach_log(self, log) -> None:
+        self._log = log
+        self._truth_ch = log.add_fixed_channel(
+            "/plant/truth", "hil.PlantTruth", [(f, "double" if f == "t_s" else "float")
+                                               for f in TRUTH_FIELDS])
+        self._sensor_ch = log.add_fixed_channel(
+            "/plant/sensors", "hil.SensorSample",
+            [("period", "fixed32")] + [(f, "fixed32") for f in SENSOR_FIELDS])
+        self._telemetry_ch = log.add_fixed_channel(
+            "/ctrl/telemetry", "hil.Telemetry",
+            [("period", "fixed32")] + [(f, "fixed32" if i < 4 else "float")
+                                       for i, f in enumerate(TELEMETRY_FIELDS)])
+
+    def period(self, k: int, truth: tuple, sample) -> None:
+        self.periods.append(k)
+        self.truth_rows.append(truth)
+        row = (sample.adc_i1, sample.adc_i2, sample.adc_vdc, sample.encoder, sample.status)
+        self.sensor_rows.append(row)
+        if self._log is not None:
+            t_ns = round(k * self.period_s * 1e9)
+            self._truth_ch.write(t_ns, *truth)
+            self._sensor_ch.write(t_ns, k, *row)
+
+    def telemetry(self, msg) -> None:
+        row = (msg.period, msg.sector, msg.speed_source, msg.state, msg.gates,
+               msg.speed_feedback_rad_s, msg.speed_encoder_rad_s, msg.speed_raw_rad_s,
+               msg.speed_lpf_rad_s, msg.speed_ekf_rad_s, msg.flux_angle_rad, msg.ekf_angle_rad,
+               msg.flux_mag_wb, msg.torque_est_nm, msg.torque_ref_nm, msg.rotor_pos_conv_rad,
+               msg.rotor_pos_ekf_rad)
+        self.telemetry_rows.append(row)
+        if self._log is not None:
+            self._telemetry_ch.write(round(msg.period * self.period_s * 1e9), *row)
+
+    def command(self, k: int, row: tuple) -> None:
+        self.command_rows.append((k, *row))
+        if self._log is not None:
+            self._log.write_json("/cmd", round(k * self.period_s * 1e9),
+                                 dict(zip(COMMAND_FIELDS, row), period=k))
+
+    def step_value(self, name: str, k: int, value: float) -> None:
+        """A step signal (``group.field``) takes ``value`` from period k on."""
+        self.step_rows.setdefault(name, []).append((k, float(value)))
+
+    def frames(self, k: int, capture: dict[str, tuple[bytes, int]]) -> None:
+        """Raw frames of the last batch of periods, one log message per direction."""
+        if self._log is None:
+            return
+        if self._frames_ch is None:
+            self._frames_ch = {
+                "out": self._log.add_bytes_channel("/link/frames_out", "hil.RawFrames"),
+                "in": self._log.add_bytes_channel("/link/frames_in", "hil.RawFrames")}
+        t_ns = round(k * self.period_s * 1e9)
+        for direction, (data, count) in capture.items():
+            if count:
+                self._frames_ch[direction].write(t_ns, data, count)
+
+    # ---------------------------------------------------------------- export
+    def arrays(self) -> dict[str, tuple[np.ndarray, np.ndarray, str]]:
+        """name -> (t_s, values, unit) for every recorded signal."""
+        out: dict[str, tuple[np.ndarray, np.ndarray, str]] = {}
+        if self.periods:
+            t = np.asarray(self.periods, dtype=np.float64) * self.period_s
+            truth = np.asarray(self.truth_rows, dtype=np.float64)
+            for i, name in enumerate(TRUTH_FIELDS):
+                if name != "t_s":
+                    out[f"plant.{name}"] = (t, truth[:, i], unit_of(name))
+            sensors = np.asarray(self.sensor_rows, dtype=np.float64)
+            for i, name in enumerate(SENSOR_FIELDS):
+                out[f"sensor.{name}"] = (t, sensors[:, i], "")
+            # Commands are step signals: hold each value until the next command.
+            if self.command_rows:
+                cmd = np.asarray(self.command_rows, dtype=np.float64)
+                idx = np.searchsorted(cmd[:, 0], np.asarray(self.periods), side="right") - 1
+                valid = idx >= 0
+                for i, name in enumerate(COMMAND_FIELDS):
+                    values = np.full(len(self.periods), np.nan)
+                    values[valid] = cmd[idx[valid], i + 1]
+                    out[f"cmd.{name}"] = (t, values, unit_of(name))
+            # Step signals on the period grid: 0 before their first change.
+            k = np.asarray(self.periods)
+            for name, rows in self.step_rows.items():
+                values = np.zeros(len(k))
+                if rows:
+                    at = np.asarray([r[0] for r in rows])
+                    idx = np.searchsorted(at, k, side="right") - 1
+                    values[idx >= 0] = np.asarray([r[1] for r in rows])[idx[idx >= 0]]
+                out[name] = (t, values, "")
+        if self.telemetry_rows:
+            tel = np.asarray(self.telemetry_rows, dtype=np.float64)
+            t_tel = tel[:, 0] * self.period_s
+            for i, name in enumerate(TELEMETRY_FIELDS):
+                out[f"ctrl.{name}"] = (t_tel, tel[:, i + 1], unit_of(name))
+        return out

@@ -1,0 +1,35 @@
+"""The outcome of a check, a step or a plan: one word with a meaning, as OpenHTF has it.
+
+Check:  PASS, MARGINAL (passes, close to a limit), FAIL, ERROR (could not be
+        computed), SKIPPED (never reached).
+Step:   PASS, FAIL, ERROR, TIMEOUT, SKIPPED.
+Plan:   PASS, FAIL, ERROR, TIMEOUT, ABORTED.
+"""
+from __future__ import annotations
+
+from enum import Enum
+
+
+class Outcome(str, Enum):
+    PASS = "PASS"
+    MARGINAL = "MARGINAL"
+    FAIL = "FAIL"
+    ERROR = "ERROR"
+    TIMEOUT = "TIMEOUT"
+    ABORTED = "ABORTED"
+    SKIPPED = "SKIPPED"
+
+    def __str__(self) -> str:
+        return self.value
+
+    @property
+    def passed(self) -> bool:
+        return self in (Outcome.PASS, Outcome.MARGINAL)
+
+
+CHECK_OUTCOMES = (Outcome.PASS, Outcome.MARGINAL, Outcome.FAIL, Outcome.ERROR, Outcome.SKIPPED)
+STEP_OUTCOMES = (Outcome.PASS, Outcome.FAIL, Outcome.ERROR, Outcome.TIMEOUT, Outcome.SKIPPED)
+PLAN_OUTCOMES = (Outcome.PASS, Outcome.FAIL, Outcome.ERROR, Outcome.TIMEOUT, Outcome.ABORTED)
+
+
+__all__ = ["Outcome", "CHECK_OUTCOMES", "STEP_OUTCOMES", "PLAN_OUTCOMES"]

@@ -1,0 +1,1 @@
+"""Ports: the bench as a server for lab tools (Modbus TCP/RTU control port)."""

@@ -1,0 +1,1 @@
+"""Reports: HTML per plan and per run, JUnit XML."""

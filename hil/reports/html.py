@@ -1,0 +1,532 @@
+"""Reports of a run: JUnit XML, a self-contained HTML page, and the JSON run record.
+
+`write_reports` writes, for one plan, into its output directory:
+
+- ``junit.xml``: one testsuite per plan, one testcase per check (FAIL ->
+  <failure>, ERROR -> <error>, not reached -> <skipped>, MARGINAL passes with
+  a note); a plan that ended in ERROR, TIMEOUT or ABORTED adds an error
+  testcase carrying the reason. Valid against the Jenkins junit-10.xsd
+  (tests/data/junit-10.xsd).
+- ``report.html``: one file with inline CSS and PNG plots as base64 data
+  URIs (matplotlib's Agg canvas, no pyplot state): the plan, its verdicts,
+  measured values against limits, a plot of each check's window with its
+  limits drawn, and the figures the plan's ``plots:`` section asks for.
+- ``result.json``: PlanResult.to_json(), plain data for other tools.
+
+`write_summary` writes the multi-plan index.html and a combined junit.xml.
+"""
+from __future__ import annotations
+
+import base64
+import html
+import io
+import json
+import math
+import re
+import socket
+import xml.etree.ElementTree as ET
+from collections.abc import Iterable, Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from hil.plans.limits import Limits
+from hil.plans.outcome import CheckResult, Outcome, PlanResult
+from hil.plans.signals import SignalSet
+from hil.plans.units import compatible, convert, is_angle
+
+MAX_PLOT_POINTS = 4000
+_COLORS = {"PASS": "#1a7f37", "MARGINAL": "#9a6700", "FAIL": "#cf222e", "ERROR": "#8250df",
+           "TIMEOUT": "#bc4c00", "ABORTED": "#57606a", "SKIPPED": "#6e7781"}
+
+
+def slug(name: str) -> str:
+    """A file-system and URL friendly form of a plan name."""
+    return re.sub(r"[^A-Za-z0-9_.-]+", "-", name).strip("-").lower() or "plan"
+
+
+# --------------------------------------------------------------------------- #
+# JUnit XML                                                                    #
+# --------------------------------------------------------------------------- #
+
+_XML_BAD = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f]")
+
+
+def _x(text: str) -> str:
+    return _XML_BAD.sub("?", str(text))
+
+
+def _time(seconds: float) -> str:
+    return f"{max(seconds, 0.0):.3f}" if math.isfinite(seconds) else "0.000"
+
+
+def junit_suite(result: PlanResult) -> ET.Element:
+    """One <testsuite> for a plan."""
+    classname = f"hil.{slug(result.plan_name)}"
+    cases: list[ET.Element] = []
+    failures = errors = skipped = 0
+    for c in result.checks:
+        case = ET.Element("testcase", name=_x(c.name), classname=classname, time="0.000")
+        detail = _x(_check_text(c))
+        if c.outcome is Outcome.FAIL:
+            failures += 1
+            ET.SubElement(case, "failure", type="FAIL", message=_x(c.message)).text = detail
+        elif c.outcome is Outcome.ERROR:
+            errors += 1
+            ET.SubElement(case, "error", type="ERROR", message=_x(c.message)).text = detail
+        elif c.outcome is Outcome.SKIPPED:
+            skipped += 1
+            ET.SubElement(case, "skipped", message=_x(c.message))
+        ET.SubElement(case, "system-out").text = detail
+        cases.append(case)
+    if result.outcome in (Outcome.ERROR, Outcome.TIMEOUT, Outcome.ABORTED):
+        errors += 1
+        case = ET.Element("testcase", name=f"plan {result.outcome.value.lower()}",
+                          classname=classname, time=_time(result.wall_duration_s))
+        ET.SubElement(case, "error", type=result.outcome.value,
+                      message=_x(result.reason)).text = _x(
+            f"{result.source}: plan '{result.plan_name}' ended {result.outcome.value}: {result.reason}")
+        cases.append(case)
+    suite = ET.Element("testsuite", name=_x(result.plan_name), tests=str(len(cases)),
+                       failures=str(failures), errors=str(errors), skipped=str(skipped),
+                       time=_time(result.wall_duration_s), timestamp=_x(result.started_at),
+                       hostname=_x(socket.gethostname()), file=_x(result.source))
+    props = ET.SubElement(suite, "properties")
+    for key, value in (("outcome", result.outcome.value), ("reason", result.reason),
+                       ("source", result.source), ("link", result.link), ("mode", result.mode),
+                       ("sim_duration_s", f"{result.sim_duration_s:.6f}"),
+                       ("log", result.log_path or "")):
+        ET.SubElement(props, "property", name=key, value=_x(value))
+    suite.extend(cases)
+    return suite
+
+
+def junit_xml(results: Iterable[PlanResult]) -> str:
+    """A <testsuites> document for one or more plans."""
+    results = list(results)
+    root = ET.Element("testsuites", name="hil-bench")
+    totals = {"tests": 0, "failures": 0, "errors": 0}
+    wall = 0.0
+    for r in results:
+        suite = junit_suite(r)
+        for key in totals:
+            totals[key] += int(suite.get(key))
+        wall += r.wall_duration_s
+        root.append(suite)
+    for key, value in totals.items():
+        root.set(key, str(value))
+    root.set("time", _time(wall))
+    ET.indent(root)
+    return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
+
+
+def _check_text(c: CheckResult) -> str:
+    lines = [f"{c.outcome.value}: {c.message}"]
+    if c.window is not None:
+        lines.append(f"window: {c.window[0]:.6f} .. {c.window[1]:.6f} s")
+    if c.signals:
+        lines.append(f"signals: {', '.join(c.signals)}")
+    if c.line is not None:
+        lines.append(f"plan line: {c.line}")
+    return "\n".join(lines)
+
+
+# --------------------------------------------------------------------------- #
+# Plots                                                                        #
+# --------------------------------------------------------------------------- #
+
+def _decimate(t: np.ndarray, y: np.ndarray, max_points: int = MAX_PLOT_POINTS) -> tuple[np.ndarray, np.ndarray]:
+    """Min/max decimation: keeps the ripple envelope a plain stride would alias away."""
+    n = len(t)
+    if n <= max_points:
+        return t, y
+    buckets = max_points // 2
+    size = n // buckets
+    m = buckets * size
+    tb = t[:m].reshape(buckets, size)
+    yb = y[:m].reshape(buckets, size)
+    imin, imax = yb.argmin(axis=1), yb.argmax(axis=1)
+    first = np.minimum(imin, imax)
+    second = np.maximum(imin, imax)
+    rows = np.arange(buckets)
+    tt = np.column_stack([tb[rows, first], tb[rows, second]]).ravel()
+    yy = np.column_stack([yb[rows, first], yb[rows, second]]).ravel()
+    return np.concatenate([tt, t[m:]]), np.concatenate([yy, y[m:]])
+
+
+def _png(fig: Figure) -> str:
+    FigureCanvasAgg(fig)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90)
+    return base64.b64encode(buf.getvalue()).decode("ascii")
+
+
+def _new_figure(width: float = 7.5, height: float = 3.0) -> Figure:
+    # Fixed margins: matplotlib's constrained layout draws every artist an extra
+    # time to measure it, which doubled the cost of a report.
+    fig = Figure(figsize=(width, height))
+    left, bottom = 0.75 / width, 0.5 / height
+    fig.subplots_adjust(left=left, right=1 - 0.15 / width, bottom=bottom, top=1 - 0.35 / height,
+                        wspace=0.3)
+    return fig
+
+
+def _hline_limits(ax, limits: Limits | None, unit: str) -> None:
+    """Limit lines (solid) and the marginal band (dashed) on an axis in `unit`."""
+    if limits is None or not compatible(limits.unit, unit):
+        return
+    lim = limits.in_unit(unit)
+    for bound, sign in ((lim.low, 1.0), (lim.high, -1.0)):
+        if bound is None:
+            continue
+        ax.axhline(bound, color="#cf222e", lw=1.0, ls="-", label="limit")
+        if lim.marginal:
+            ax.axhline(bound + sign * lim.marginal, color="#9a6700", lw=0.8, ls="--",
+                       label="marginal")
+
+
+def _dedupe_legend(ax) -> None:
+    handles, labels = ax.get_legend_handles_labels()
+    seen: dict[str, object] = {}
+    for h, lab in zip(handles, labels):
+        seen.setdefault(lab, h)
+    if seen:
+        ax.legend(list(seen.values()), list(seen), fontsize=7, loc="best")
+
+
+def _plot_window(c: CheckResult) -> tuple[float, float]:
+    """The check's window with 10 % of context either side."""
+    t0, t1 = c.window
+    pad = 0.1 * (t1 - t0)
+    return t0 - pad, t1 + pad
+
+
+def check_figure(c: CheckResult, signals: SignalSet) -> str | None:
+    """A base64 PNG of a check's window with its limits, or None when there is nothing to plot."""
+    if c.window is None or not c.signals or any(n not in signals for n in c.signals):
+        return None
+    if c.kind == "circularity":
+        return _locus_check_figure(c, signals)
+    a, b = _plot_window(c)
+    main = signals[c.signals[0]]
+    unit = main.unit
+    fig = _new_figure()
+    ax = fig.add_subplot(1, 2 if c.kind == "thd" else 1, 1)
+    for name in c.signals:
+        s = signals[name]
+        if not compatible(s.unit, unit):
+            continue
+        w = s.window(a, b).to_unit(unit)
+        t, y = _decimate(w.t_s, w.values)
+        ax.plot(t, y, lw=0.8, label=name)
+    ax.axvspan(c.window[0], c.window[1], color="#0969da", alpha=0.06, label="window")
+    d = c.details
+    t0 = c.window[0]
+    if c.kind in ("final_value", "bound", "statistic"):
+        _hline_limits(ax, c.limits, unit)
+    elif c.kind in ("settling_time", "rise_time", "overshoot") and "target" in d:
+        su = d.get("signal_unit", unit)
+        target = float(convert(d["target"], su, unit))
+        ax.axhline(target, color="#57606a", lw=0.8, ls=":", label="target")
+        if c.kind == "settling_time" and "band" in d:
+            band = abs(float(convert(d["band"], su, unit)))
+            ax.axhspan(target - band, target + band, color="#1a7f37", alpha=0.12, label="band")
+            if c.measured is not None and math.isfinite(c.measured):
+                ax.axvline(t0 + convert(c.measured, c.unit, "s"), color="#1a7f37", lw=1.0,
+                           label="settled")
+            if c.limits is not None and c.limits.high is not None:
+                ax.axvline(t0 + convert(c.limits.high, c.limits.unit, "s"), color="#cf222e",
+                           lw=1.0, ls="--", label="limit")
+        if c.kind == "rise_time" and "t_from_s" in d:
+            initial = float(convert(d["initial"], su, unit))
+            for pct, key in ((d["from_pct"], "t_from_s"), (d["to_pct"], "t_to_s")):
+                ax.axhline(initial + (target - initial) * pct / 100.0, color="#57606a", lw=0.6, ls=":")
+                if math.isfinite(d[key]):
+                    ax.axvline(d[key], color="#1a7f37", lw=1.0, label="crossings")
+        if c.kind == "overshoot" and c.limits is not None and c.limits.high is not None:
+            initial = float(convert(d["initial"], su, unit))
+            peak_ok = target + (target - initial) * convert(c.limits.high, c.limits.unit, "%") / 100
+            ax.axhline(peak_ok, color="#cf222e", lw=1.0, label="limit")
+    elif c.kind == "envelope" and "_tube" in d:
+        tt, lo, hi = d["_tube"]
+        ax.fill_between(tt, lo, hi, color="#1a7f37", alpha=0.15, step="mid", label="envelope")
+    elif c.kind == "ripple" and c.limits is not None and "mean" in d and compatible(c.limits.unit, unit):
+        mean = float(convert(d["mean"], main.unit, unit))
+        if c.limits.high is not None:
+            half = convert(c.limits.high, c.limits.unit, unit) / 2.0
+            ax.axhspan(mean - half, mean + half, color="#cf222e", alpha=0.08, label="limit (p-p)")
+    ax.set_xlabel("t (s)")
+    ax.set_ylabel(unit)
+    ax.grid(True, lw=0.3)
+    _dedupe_legend(ax)
+    if c.kind == "thd" and "harmonic_amplitudes" in d:
+        ax2 = fig.add_subplot(1, 2, 2)
+        amps = np.asarray(d["harmonic_amplitudes"], dtype=float)
+        ax2.bar(np.arange(1, len(amps) + 1), amps / amps[0] * 100.0, color="#0969da")
+        ax2.set_yscale("log")
+        ax2.set_xlabel("harmonic")
+        ax2.set_ylabel("% of fundamental")
+        ax2.grid(True, lw=0.3)
+    fig.suptitle(f"{c.name} [{c.outcome.value}]", fontsize=9, color=_COLORS.get(c.outcome.value))
+    return _png(fig)
+
+
+def _locus_check_figure(c: CheckResult, signals: SignalSet) -> str:
+    x = signals[c.signals[0]].window(*c.window)
+    y = signals[c.signals[1]].window(*c.window).to_unit(x.unit)
+    fig = _new_figure(4.2, 4.0)
+    ax = fig.add_subplot(1, 1, 1)
+    xs, ys = x.values, y.resampled(x.t_s)
+    ax.plot(xs, ys, lw=0.6, label="locus")
+    d = c.details
+    if "r_mean" in d:
+        th = np.linspace(0, 2 * np.pi, 361)
+        cx, cy = d.get("centre_x", 0.0), d.get("centre_y", 0.0)
+        r = d["r_mean"]
+        ax.plot(cx + r * np.cos(th), cy + r * np.sin(th), color="#57606a", ls=":", lw=0.8,
+                label="mean circle")
+        if c.limits is not None and c.limits.high is not None and compatible(c.limits.unit, "%"):
+            half = r * convert(c.limits.high, c.limits.unit, "1") / 2.0
+            for rr in (r - half, r + half):
+                ax.plot(cx + rr * np.cos(th), cy + rr * np.sin(th), color="#cf222e", lw=0.8,
+                        label="limit")
+    ax.set_aspect("equal")
+    ax.set_xlabel(f"{x.name} ({x.unit})")
+    ax.set_ylabel(f"{y.name} ({y.unit})")
+    ax.grid(True, lw=0.3)
+    _dedupe_legend(ax)
+    fig.suptitle(f"{c.name} [{c.outcome.value}]", fontsize=9, color=_COLORS.get(c.outcome.value))
+    return _png(fig)
+
+
+def plan_figure(spec, signals: SignalSet, marks: Mapping[str, float], end_s: float) -> str | None:
+    """A base64 PNG for one entry of a plan's ``plots:`` section (hil.plan.PlotSpec)."""
+    present = [n for n in spec.signals if n in signals]
+    if not present or (spec.type == "xy" and len(present) < 2):
+        return None
+    if spec.window is not None:
+        try:
+            a, b = spec.window.resolve(marks, end_s)
+        except KeyError:
+            a, b = 0.0, end_s
+    else:
+        a, b = 0.0, end_s
+    if spec.type == "xy":
+        x = signals[spec.signals[0]].window(a, b)
+        y = signals[spec.signals[1]].window(a, b).to_unit(x.unit)
+        fig = _new_figure(4.2, 4.0)
+        ax = fig.add_subplot(1, 1, 1)
+        ax.plot(x.values, y.resampled(x.t_s), lw=0.6)
+        ax.set_aspect("equal")
+        ax.set_xlabel(f"{x.name} ({x.unit})")
+        ax.set_ylabel(f"{y.name} ({y.unit})")
+    else:
+        fig = _new_figure()
+        ax = fig.add_subplot(1, 1, 1)
+        units = set()
+        for name in present:
+            s = signals[name].window(a, b)
+            if spec.unit is not None:
+                s = s.to_unit(spec.unit)
+            elif is_angle(s.unit):
+                s = s.to_unit("deg")
+            units.add(s.unit)
+            t, y = _decimate(s.t_s, s.values)
+            ax.plot(t, y, lw=0.8, label=name)
+        for mark, t_mark in marks.items():
+            if a <= t_mark <= b and mark != "start":
+                ax.axvline(t_mark, color="#57606a", lw=0.6, ls=":")
+                ax.annotate(mark, (t_mark, 1.0), xycoords=("data", "axes fraction"), fontsize=7,
+                            rotation=90, va="top", ha="right", color="#57606a")
+        ax.set_xlabel("t (s)")
+        ax.set_ylabel(", ".join(sorted(units)))
+        if len(present) > 1:
+            ax.legend(fontsize=7, loc="best")
+    ax.grid(True, lw=0.3)
+    fig.suptitle(spec.title, fontsize=9)
+    return _png(fig)
+
+
+# --------------------------------------------------------------------------- #
+# HTML                                                                         #
+# --------------------------------------------------------------------------- #
+
+_CSS = """
+body{font-family:system-ui,-apple-system,Segoe UI,Helvetica,Arial,sans-serif;margin:1.5em auto;
+max-width:1100px;color:#1f2328;padding:0 1em}
+h1{font-size:1.5em;margin-bottom:.2em}h2{font-size:1.15em;margin-top:1.6em;border-bottom:1px solid #d0d7de}
+h3{font-size:1em;margin-bottom:.3em}
+table{border-collapse:collapse;width:100%;font-size:.88em}td,th{border:1px solid #d0d7de;padding:3px 6px;
+text-align:left;vertical-align:top}th{background:#f6f8fa}td.num{text-align:right;font-variant-numeric:tabular-nums}
+.badge{display:inline-block;padding:1px 8px;border-radius:10px;color:#fff;font-weight:600;font-size:.85em}
+pre{background:#f6f8fa;padding:.6em;white-space:pre-wrap;font-size:.85em}
+img{max-width:100%;border:1px solid #d0d7de;margin:.3em 0}
+.meta td:first-child{width:12em;color:#57606a}.muted{color:#57606a;font-size:.85em}
+"""
+
+
+def _badge(outcome: str) -> str:
+    return f'<span class="badge" style="background:{_COLORS.get(outcome, "#57606a")}">{html.escape(outcome)}</span>'
+
+
+def _fmt(value: float | None) -> str:
+    if value is None:
+        return "-"
+    if math.isinf(value):
+        return "inf" if value > 0 else "-inf"
+    return f"{value:.5g}"
+
+
+def _img(b64: str | None, alt: str) -> str:
+    if b64 is None:
+        return '<p class="muted">(no plot: the data is not available)</p>'
+    return f'<img alt="{html.escape(alt)}" src="data:image/png;base64,{b64}">'
+
+
+def html_report(result: PlanResult, signals: SignalSet, plots: Sequence = ()) -> str:
+    """The self-contained HTML page of one plan's run."""
+    e = html.escape
+    end_s = signals.end_s if len(signals) else result.sim_duration_s
+    counts = result.counts()
+    parts = [f"<!DOCTYPE html><html lang=\"en\"><head><meta charset=\"utf-8\">"
+             f"<title>{e(result.plan_name)} - {e(result.outcome.value)}</title><style>{_CSS}</style></head><body>",
+             f"<h1>{e(result.plan_name)} {_badge(result.outcome.value)}</h1>",
+             f"<p>{e(result.reason)}</p>"]
+    meta = [("source", result.source), ("link / mode", f"{result.link} / {result.mode}"),
+            ("simulated time", f"{result.sim_duration_s:.4f} s"),
+            ("wall time", f"{result.wall_duration_s:.2f} s"),
+            ("started / ended", f"{result.started_at} / {result.ended_at}"),
+            ("log", result.log_path or "-"),
+            ("checks", ", ".join(f"{n} {k}" for k, n in counts.items() if n))]
+    parts.append('<table class="meta">' + "".join(f"<tr><td>{e(k)}</td><td>{e(str(v))}</td></tr>"
+                                                  for k, v in meta) + "</table>")
+    if result.description:
+        parts.append(f"<h2>Description</h2><pre>{e(result.description)}</pre>")
+
+    parts.append("<h2>Verdicts</h2><table><tr><th>#</th><th>check</th><th>kind</th>"
+                 "<th>measured</th><th>limits</th><th>outcome</th><th>message</th></tr>")
+    for i, c in enumerate(result.checks, 1):
+        unit = "" if c.unit == "1" else f" {c.unit}"
+        limits = c.limits.describe() if c.limits is not None else "-"
+        parts.append(f"<tr><td>{i}</td><td><a href=\"#check-{i}\">{e(c.name)}</a></td><td>{e(c.kind)}</td>"
+                     f"<td class=\"num\">{e(_fmt(c.measured))}{e(unit)}</td><td>{e(limits)}</td>"
+                     f"<td>{_badge(c.outcome.value)}</td><td>{e(c.message)}</td></tr>")
+    parts.append("</table>")
+
+    if plots:
+        parts.append("<h2>Figures</h2>")
+        for spec in plots:
+            parts.append(f"<h3>{e(spec.title)}</h3>{_img(plan_figure(spec, signals, result.marks, end_s), spec.title)}")
+
+    parts.append("<h2>Check windows</h2>")
+    for i, c in enumerate(result.checks, 1):
+        where = f"line {c.line}" if c.line is not None else ""
+        window = (f"{c.window[0]:.4f} .. {c.window[1]:.4f} s" if c.window is not None else "")
+        parts.append(f'<h3 id="check-{i}">{i}. {e(c.name)} {_badge(c.outcome.value)}</h3>'
+                     f'<p class="muted">{e(c.kind)}; {e(", ".join(c.signals))}; {e(window)} {e(where)}</p>')
+        if c.outcome is not Outcome.SKIPPED and c.plot:
+            parts.append(_img(check_figure(c, signals), c.name))
+
+    if result.steps:
+        parts.append("<h2>Steps</h2><table><tr><th>#</th><th>line</th><th>step</th><th>outcome</th>"
+                     "<th>start (s)</th><th>end (s)</th><th>message</th></tr>")
+        for s in result.steps:
+            parts.append(f"<tr><td>{s.index + 1}</td><td>{s.line or ''}</td><td>{e(s.kind)}</td>"
+                         f"<td>{_badge(s.outcome.value)}</td><td class=\"num\">{_fmt(s.start_s)}</td>"
+                         f"<td class=\"num\">{_fmt(s.end_s)}</td><td>{e(s.message)}</td></tr>")
+        parts.append("</table>")
+    if result.marks:
+        parts.append("<h2>Marks</h2><p>" + ", ".join(f"{e(k)} = {v:.6f} s" for k, v in result.marks.items())
+                     + "</p>")
+    parts.append('<p class="muted">hil-bench report</p></body></html>\n')
+    return "".join(parts)
+
+
+# --------------------------------------------------------------------------- #
+# Files                                                                        #
+# --------------------------------------------------------------------------- #
+
+def _plots_for(result: PlanResult, plan) -> Sequence:
+    if plan is not None:
+        return plan.plots
+    source = Path(result.source)
+    if source.is_file():
+        from hil.plans.format import load_plan
+        from configfile.source import ConfigError
+
+        try:
+            return load_plan(source).plots
+        except ConfigError:
+            return ()
+    return ()
+
+
+def write_reports(result: PlanResult, signals: SignalSet, out_dir: str | Path,
+                  plan=None) -> dict[str, Path]:
+    """Writes junit.xml, report.html and result.json into out_dir; returns their paths.
+
+    plan: the hil.plan.Plan that ran, for its ``plots:`` section (default:
+    reloaded from result.source).
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = {"junit": out / "junit.xml", "html": out / "report.html", "json": out / "result.json"}
+    paths["junit"].write_text(junit_xml([result]), encoding="utf-8")
+    paths["html"].write_text(html_report(result, signals, _plots_for(result, plan)), encoding="utf-8")
+    paths["json"].write_text(json.dumps(result.to_json(), indent=2) + "\n", encoding="utf-8")
+    return paths
+
+
+def write_summary(entries: Sequence[tuple[PlanResult, Mapping[str, Path]]],
+                  out_dir: str | Path) -> dict[str, Path]:
+    """index.html (one row per plan, linking its report) and a combined junit.xml."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    e = html.escape
+    results = [r for r, _ in entries]
+    rows = []
+    for r, paths in entries:
+        counts = r.counts()
+        link = paths.get("html")
+        href = ""
+        if link is not None:
+            try:
+                href = Path(link).resolve().relative_to(out.resolve()).as_posix()
+            except ValueError:
+                href = Path(link).resolve().as_uri()
+        total = sum(counts.values())
+        passed = counts["PASS"] + counts["MARGINAL"]
+        name = f'<a href="{e(href)}">{e(r.plan_name)}</a>' if href else e(r.plan_name)
+        rows.append(f"<tr><td>{name}</td><td>{_badge(r.outcome.value)}</td>"
+                    f"<td class=\"num\">{passed}/{total}</td><td class=\"num\">{counts['MARGINAL']}</td>"
+                    f"<td class=\"num\">{r.sim_duration_s:.3f}</td><td class=\"num\">{r.wall_duration_s:.2f}</td>"
+                    f"<td>{e(r.reason)}</td></tr>")
+    worst = _worst([r.outcome for r in results])
+    page = (f"<!DOCTYPE html><html lang=\"en\"><head><meta charset=\"utf-8\"><title>hil-bench run - "
+            f"{e(worst)}</title><style>{_CSS}</style></head><body><h1>hil-bench run {_badge(worst)}</h1>"
+            f"<p>{len(results)} plan(s)</p><table><tr><th>plan</th><th>outcome</th><th>checks passed</th>"
+            f"<th>marginal</th><th>simulated (s)</th><th>wall (s)</th><th>reason</th></tr>"
+            + "".join(rows) + "</table></body></html>\n")
+    paths = {"html": out / "index.html", "junit": out / "junit.xml", "json": out / "summary.json"}
+    paths["html"].write_text(page, encoding="utf-8")
+    paths["junit"].write_text(junit_xml(results), encoding="utf-8")
+    paths["json"].write_text(json.dumps({"outcome": worst, "plans": [
+        {"plan": r.plan_name, "outcome": r.outcome.value, "reason": r.reason,
+         "reports": {k: str(v) for k, v in p.items()}} for r, p in entries]}, indent=2) + "\n",
+        encoding="utf-8")
+    return paths
+
+
+def _worst(outcomes: Iterable[Outcome]) -> str:
+    order = [Outcome.PASS, Outcome.FAIL, Outcome.TIMEOUT, Outcome.ERROR, Outcome.ABORTED]
+    worst = Outcome.PASS
+    for o in outcomes:
+        if o in order and order.index(o) > order.index(worst):
+            worst = o
+    return worst.value
+
+
+__all__ = ["write_reports", "write_summary", "junit_xml", "junit_suite", "html_report",
+           "check_figure", "plan_figure", "slug"]

@@ -1,0 +1,491 @@
+"""Runs plans: steps in simulated time against a session, then checks, then reports.
+
+A plan's steps execute in order on one BenchSession. Stimuli and commands act
+at the current period; ``run`` and ``wait_until`` advance periods (a wait's
+timeout is enforced to the period, in simulated time); ``mark`` names the
+current time; a ``check`` remembers when it was reached and is evaluated at the
+end over the recorded signals (its window may reach back to any mark).
+
+Whatever ends the run — its last step, a TIMEOUT, a dead board (ERROR), Ctrl-C
+(ABORTED) — the session's teardown safe-states the plant and closes the log,
+and the reports (JUnit XML, HTML, JSON record) are written with every check,
+the ones never reached marked SKIPPED.
+"""
+from __future__ import annotations
+
+import datetime as _dt
+import math
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Iterable
+
+from plant_rt import TRUTH_FIELDS
+from hil.session.board_params import load_bench_profile
+
+from hil.plans.checks import evaluate_check
+from hil.plans.outcome import CheckResult, Outcome, PlanResult, StepResult, plan_outcome
+from hil.plans.format import (
+    PROFILE_NAMES, CheckStep, CommandStep, DcLinkStep, FaultStep, LoadStep, MarkStep, ParamSetStep,
+    Plan, PlantParamStep, RunStep, WaitUntilStep, load_plan, plan_files,
+)
+from hil.logs.recorder import SENSOR_FIELDS, TELEMETRY_FIELDS, COMMAND_FIELDS
+from hil.reports.html import slug, write_reports, write_summary
+from hil.session.bench_session import BenchSession, SessionConfig, SessionError
+from hil.plans.signals import SignalSet
+from configfile.source import ConfigError
+
+PROGRESS_CHUNK_S = 0.01  # simulated seconds between progress updates and wall-clock checks
+
+
+class PlanTimeout(Exception):
+    """A step's own time limit, or the plan's wall-clock budget, ran out."""
+
+
+def expand_plan_paths(paths: Iterable[str | Path]) -> list[Path]:
+    files = plan_files(paths)
+    missing = [p for p in files if not p.exists()]
+    if missing:
+        raise ConfigError("no such plan file or directory", str(missing[0]))
+    return files
+
+
+def profile_for(plan: Plan):
+    if plan.profile_path is not None:
+        return load_bench_profile(plan.profile_path, overrides=dict(plan.overrides) or None)
+    if plan.profile not in (None, *PROFILE_NAMES):
+        raise ConfigError(f"unknown profile '{plan.profile}' (named profiles: "
+                          f"{', '.join(PROFILE_NAMES)}, or a path to a YAML file)",
+                          str(plan.source_path))
+    return load_bench_profile(None, overrides=dict(plan.overrides) or None)
+
+
+# --------------------------------------------------------------------------- live signals
+def live_getter(session: BenchSession, name: str) -> Callable[[], float]:
+    """The latest value of a signal while running (wait_until), in its recorded unit."""
+    group, _, fld = name.partition(".")
+    rec = session.recorder
+    if group == "plant" and fld in TRUTH_FIELDS:
+        i = TRUTH_FIELDS.index(fld)
+        return lambda: rec.truth_rows[-1][i] if rec.truth_rows else math.nan
+    if group == "sensor" and fld in SENSOR_FIELDS:
+        i = SENSOR_FIELDS.index(fld)
+        return lambda: rec.sensor_rows[-1][i] if rec.sensor_rows else math.nan
+    if group == "ctrl" and fld in TELEMETRY_FIELDS:
+        i = TELEMETRY_FIELDS.index(fld) + 1
+        return lambda: rec.telemetry_rows[-1][i] if rec.telemetry_rows else math.nan
+    if group == "cmd" and fld in COMMAND_FIELDS:
+        i = COMMAND_FIELDS.index(fld) + 1
+        return lambda: rec.command_rows[-1][i] if rec.command_rows else math.nan
+    raise ConfigError(f"signal '{name}' is not recorded live", None)
+
+
+def live_unit(name: str) -> str:
+    from hil.logs.recorder import unit_of
+    from hil.plans.signals import catalog_unit
+
+    return catalog_unit(name) or unit_of(name.partition(".")[2]) or "1"
+
+
+# --------------------------------------------------------------------------- stimuli
+class Stimuli:
+    """Per-period stimuli applied between periods: DC-link ramps, and a repeated load table
+    (which the plant's load model does not have), evaluated once per period and held."""
+
+    def __init__(self, session: BenchSession):
+        self.session = session
+        self.ramps: list[tuple[float, float, float, float]] = []  # t0, t1, v0, v1
+        self.load_step: LoadStep | None = None
+        self.load_t0 = 0.0
+        self.load_before_nm = 0.0
+
+    def per_period_load(self, step: LoadStep) -> None:
+        plant = self.session.plant
+        self.load_step, self.load_t0 = step, plant.t_s
+        self.load_before_nm = plant.truth()[_LOAD_INDEX]
+        self(plant.period)
+
+    def dc_link(self, step: DcLinkStep) -> None:
+        plant = self.session.plant
+        if step.ramp_s <= 0:
+            plant.set_dc_voltage(step.voltage_v)
+            return
+        now = plant.t_s
+        v0 = plant.dc_source_voltage_v if hasattr(plant, "dc_source_voltage_v") else \
+            self.session.profile.dc_link.source_voltage_v
+        self.ramps = [(now, now + step.ramp_s, v0, step.voltage_v)]
+
+    def __call__(self, _period: int) -> None:
+        if self.load_step is not None:
+            plant = self.session.plant
+            plant.load.set_constant(self.load_step.torque_at(plant.t_s - self.load_t0, 0.0,
+                                                             self.load_before_nm))
+        if not self.ramps:
+            return
+        t = self.session.plant.t_s
+        t0, t1, v0, v1 = self.ramps[0]
+        frac = min(max((t - t0) / (t1 - t0), 0.0), 1.0)
+        self.session.plant.set_dc_voltage(v0 + frac * (v1 - v0))
+        if frac >= 1.0:
+            self.ramps.clear()
+
+
+_LOAD_INDEX = TRUTH_FIELDS.index("load_torque_nm")
+
+
+def apply_load(session: BenchSession, stimuli: Stimuli, step: LoadStep) -> None:
+    load = session.plant.load
+    now = session.plant.t_s
+    stimuli.load_step = None
+    # The plant's load is profile(t) + kw * speed: a step replaces both terms.
+    load.set_speed_proportional(0.0)
+    if step.type == "table" and step.repeat:
+        stimuli.per_period_load(step)
+    elif step.type == "constant":
+        load.set_constant(step.torque_nm)
+    elif step.type == "step":
+        load.set_step(now + step.delay_s, step.torque_nm)
+    elif step.type == "ramp":
+        load.set_ramp(step.torque_nm, step.duration_s)
+    elif step.type == "table":
+        load.set_table([(now + t, nm) for t, nm in step.points])
+    elif step.type == "speed_proportional":
+        load.set_constant(step.offset_nm)
+        load.set_speed_proportional(step.nm_per_rad_s)
+
+
+# --------------------------------------------------------------------------- running
+@dataclass
+class RunOptions:
+    link: str | None = None
+    mode: str | None = None
+    out_dir: Path | None = None
+    seed: int = 0
+    progress: Any = None            # callable(done_s, total_s) or None
+    modbus: tuple[str, int] | None = None
+    log: bool = True
+
+
+@dataclass
+class _RunState:
+    steps: list[StepResult] = field(default_factory=list)
+    checks_reached: list[tuple[CheckStep, float]] = field(default_factory=list)
+    marks: dict[str, float] = field(default_factory=lambda: {"start": 0.0})
+
+
+def run_plan(plan: Plan, link: str | None = None, mode: str | None = None,
+             out_dir: Path | None = None, seed: int = 0, progress=None,
+             modbus: tuple[str, int] | None = None) -> tuple[PlanResult, SignalSet]:
+    """Runs one plan; writes log and reports into out_dir when given. Never raises for a
+    failing board or plan: the outcome says what happened."""
+    opts = RunOptions(link=link, mode=mode, out_dir=out_dir, seed=seed, progress=progress,
+                      modbus=modbus)
+    return _run(plan, opts)
+
+
+def _run(plan: Plan, opts: RunOptions) -> tuple[PlanResult, SignalSet]:
+    link = opts.link or plan.link or "stub"
+    mode = opts.mode or plan.mode or "lockstep"
+    plan_dir = None
+    log_path = None
+    if opts.out_dir is not None:
+        plan_dir = Path(opts.out_dir) / slug(plan.name)
+        plan_dir.mkdir(parents=True, exist_ok=True)
+        log_path = plan_dir / "log.mcap"
+    started = _dt.datetime.now(_dt.timezone.utc)
+    wall0 = time.monotonic()
+    state = _RunState()
+    error = aborted = timeout = None
+    session = None
+    port = None
+    try:
+        profile = profile_for(plan)
+        config = SessionConfig(link=link, mode=mode, log_path=log_path, seed=opts.seed,
+                               metadata={"plan": {"name": plan.name, "source": str(plan.source_path)}})
+        session = BenchSession(profile, config)
+        stimuli = Stimuli(session)
+        session.on_period = stimuli
+        session.start()
+        if opts.modbus is not None:
+            from hil.faults.injector import MODBUS_BIT_MASK, apply_fault_bits
+            from hil.ports.modbus import ControlMailbox, ModbusPort
+
+            mailbox = ControlMailbox(load_torque_nm=profile.load.torque_nm,
+                                     dc_link_voltage_v=profile.dc_link.source_voltage_v)
+            session.attach_mailbox(mailbox, on_fault_bits=lambda bits: apply_fault_bits(session, bits))
+            port = ModbusPort(mailbox, host=opts.modbus[0], port=opts.modbus[1],
+                              isolation="process" if mode == "realtime" else "thread",
+                              fault_bits_mask=MODBUS_BIT_MASK)
+            port.start()
+        deadline = None if plan.timeout_s is None else wall0 + plan.timeout_s
+        _execute(plan, session, stimuli, state, deadline, opts.progress)
+        session.drain()
+    except KeyboardInterrupt:
+        aborted = "aborted by the user (Ctrl-C)"
+    except PlanTimeout as exc:
+        timeout = str(exc)
+    except (SessionError, ConfigError, OSError, ValueError, RuntimeError) as exc:
+        error = str(exc)
+        if session is not None and state.steps and session.error is None:
+            pass
+    finally:
+        if port is not None:
+            port.stop()
+        if session is not None:
+            session.close(reason=aborted or error or timeout)
+    sim_end = session.plant.t_s if session is not None else 0.0
+    signals = SignalSet.from_arrays(session.recorder.arrays()) if session is not None else SignalSet()
+    checks: list[CheckResult] = []
+    by_name: dict[str, CheckResult] = {}
+    for spec, now_s in state.checks_reached:
+        result = evaluate_check(spec, signals, state.marks, now_s=now_s, results=by_name)
+        checks.append(result)
+        by_name[spec.name] = result
+    # A check step's outcome is its check's.
+    steps = []
+    for s in state.steps:
+        match = next((c for c in checks if c.line == s.line and s.kind == "check"), None)
+        if match is not None:
+            outcome = {Outcome.PASS: Outcome.PASS, Outcome.MARGINAL: Outcome.PASS,
+                       Outcome.FAIL: Outcome.FAIL}.get(match.outcome, Outcome.ERROR)
+            s = StepResult(s.index, s.kind, outcome, s.line, s.start_s, s.end_s, match.message)
+        steps.append(s)
+    why = aborted or error or timeout
+    if why is not None:
+        rest_steps, rest_checks = skipped_remainder(plan, steps, checks, why)
+        steps += rest_steps
+        checks += rest_checks
+    outcome, reason = plan_outcome(steps, checks, error=error, aborted=aborted, timeout=timeout)
+    extra: dict[str, Any] = {}
+    if session is not None:
+        extra["board"] = session.board_name
+        extra["link_counters"] = session.link_counters() if session.conn is not None else {}
+        extra["board_faults"] = [{"code": f.code, "period": f.period, "value": f.value}
+                                 for f in session.faults]
+        if session.fault_injector is not None:
+            extra["faults_injected"] = list(session.fault_injector.history)
+        if session.rt_stats:
+            extra["realtime"] = dict(session.rt_stats)
+    result = PlanResult(
+        plan_name=plan.name, source=str(plan.source_path), outcome=outcome, reason=reason,
+        steps=tuple(steps), checks=tuple(checks), started_at=started.isoformat(timespec="seconds"),
+        ended_at=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        sim_duration_s=sim_end, wall_duration_s=time.monotonic() - wall0, link=link, mode=mode,
+        log_path=str(log_path) if log_path is not None else None, description=plan.description,
+        marks=dict(state.marks), extra=extra)
+    if plan_dir is not None:
+        write_reports(result, signals, plan_dir, plan=plan)
+    return result, signals
+
+
+def _execute(plan: Plan, session: BenchSession, stimuli: Stimuli, state: _RunState,
+             deadline: float | None, progress) -> None:
+    period = session.period_s
+    total_s = plan.min_sim_duration_s()
+    chunk = max(1, round(PROGRESS_CHUNK_S / period))
+
+    def advance(count: int, stop=None) -> int:
+        done = 0
+        while done < count:
+            n = min(chunk, count - done)
+            ran = session.run_periods(n, stop)
+            done += ran
+            if progress is not None:
+                progress(session.plant.t_s, total_s)
+            if deadline is not None and time.monotonic() > deadline:
+                raise PlanTimeout(f"plan '{plan.name}' exceeded its wall-clock budget "
+                                  f"timeout_s = {plan.timeout_s:g} s")
+            if ran < n:
+                break
+        return done
+
+    for step in plan.steps:
+        t_start = session.plant.t_s
+        outcome, message = Outcome.PASS, ""
+        if isinstance(step, CommandStep):
+            session.send_command(**step.changes())
+        elif isinstance(step, ParamSetStep):
+            for name, value in step.params:
+                session.param_set(name, value)
+        elif isinstance(step, LoadStep):
+            apply_load(session, stimuli, step)
+            session.event("load", type=step.type, torque_nm=step.torque_nm)
+        elif isinstance(step, DcLinkStep):
+            stimuli.dc_link(step)
+            session.event("dc_link", voltage_v=step.voltage_v, ramp_s=step.ramp_s)
+        elif isinstance(step, PlantParamStep):
+            for name, value in step.params:
+                session.plant.set_motor_param(name, value)
+            session.event("plant_param", **dict(step.params))
+        elif isinstance(step, FaultStep):
+            from hil.faults.injector import apply_fault
+
+            apply_fault(session, step)
+        elif isinstance(step, RunStep):
+            advance(round(step.duration_s / period))
+        elif isinstance(step, WaitUntilStep):
+            getter = live_getter(session, step.signal)
+            test = step.predicate(live_unit(step.signal))
+            hold_periods = max(1, round(step.hold_s / period)) if step.hold_s else 1
+            held = [0]
+
+            def met() -> bool:
+                if test(getter()):
+                    held[0] += 1
+                else:
+                    held[0] = 0
+                return held[0] >= hold_periods
+
+            limit = round(step.timeout_s / period)
+            ran = advance(limit, met)
+            if held[0] < hold_periods:
+                message = f"condition not met within {step.timeout_s:g} s: {step.describe()}"
+                state.steps.append(StepResult(step.index, step.kind, Outcome.TIMEOUT, step.line,
+                                              t_start, session.plant.t_s, message))
+                raise PlanTimeout(f"step {step.index + 1} (wait_until, line {step.line}): {message}")
+            message = f"met after {ran * period * 1e3:.1f} ms"
+        elif isinstance(step, MarkStep):
+            state.marks[step.name] = session.plant.t_s
+            session.event("mark", name=step.name)
+        elif isinstance(step, CheckStep):
+            # The last recorded sample is the previous period's (signals sit at t_k).
+            state.checks_reached.append((step, max(session.plant.t_s - period, 0.0)))
+        state.steps.append(StepResult(step.index, step.kind, outcome, step.line, t_start,
+                                      session.plant.t_s, message))
+
+
+# --------------------------------------------------------------------------- pytest / Python API
+class Bench:
+    """A running session for acceptance tests written in Python (the pytest ``bench`` fixture).
+
+    >>> with Bench(link="stub") as bench:
+    ...     bench.command(enable=True, speed_source="encoder", speed_ref_rpm=1500)
+    ...     bench.run(0.2)
+    ...     assert abs(bench.signals()["plant.speed_rpm"].values[-1] - 1500) < 30
+    """
+
+    def __init__(self, link: str = "stub", mode: str = "lockstep", profile=None,
+                 log_path: Path | None = None, seed: int = 0):
+        self.profile = profile or load_bench_profile()
+        self.session = BenchSession(self.profile, SessionConfig(link=link, mode=mode,
+                                                                log_path=log_path, seed=seed))
+
+    def __enter__(self) -> "Bench":
+        self.session.__enter__()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.session.__exit__(*exc)
+
+    @property
+    def plant(self):
+        return self.session.plant
+
+    def command(self, **changes) -> None:
+        self.session.send_command(**changes)
+
+    def param_set(self, name: str, value: float) -> float:
+        return self.session.param_set(name, value)
+
+    def run(self, duration_s: float) -> None:
+        self.session.run_periods(round(duration_s / self.session.period_s))
+
+    @property
+    def faults(self):
+        """The fault injector: ``bench.faults.inject("open_phase", phase="a")`` (hil/faults/injector.py)."""
+        from hil.faults.injector import injector
+
+        return injector(self.session)
+
+    def signals(self) -> SignalSet:
+        return SignalSet.from_arrays(self.session.recorder.arrays())
+
+
+# --------------------------------------------------------------------------- CLI
+def _progress_bar(enabled: bool):
+    if not enabled or not sys.stderr.isatty():
+        return None
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+    return Progress(TextColumn("{task.description}"), BarColumn(),
+                    TextColumn("{task.completed:.3f}/{task.total:.3f} s simulated"),
+                    TimeElapsedColumn(), transient=True)
+
+
+def run_command(args) -> int:
+    from hil.cli.serve import parse_host_port
+
+    files = expand_plan_paths(args.plans)
+    if not files:
+        print(f"hil run: no plans found in {', '.join(map(str, args.plans))}", file=sys.stderr)
+        return 2
+    plans = [load_plan(f) for f in files]  # validate every plan before anything runs
+    modbus = parse_host_port(args.modbus) if args.modbus else None
+    out = Path(args.out)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        probe = out / ".hil-write-test"
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as exc:
+        raise OSError(f"--out directory '{out}' is not writable: {exc.strerror}") from None
+    entries = []
+    bar = _progress_bar(not args.no_progress)
+    exit_code = 0
+    try:
+        if bar is not None:
+            bar.start()
+        for plan in plans:
+            callback = None
+            if bar is not None:
+                task = bar.add_task(plan.name, total=plan.min_sim_duration_s())
+                callback = lambda done, total, task=task: bar.update(task, completed=done)
+            result, _signals = run_plan(plan, link=args.link, mode=args.mode, out_dir=out,
+                                        seed=args.seed, progress=callback, modbus=modbus)
+            plan_dir = out / slug(plan.name)
+            entries.append((result, {"dir": plan_dir, "html": plan_dir / "report.html",
+                                     "junit": plan_dir / "junit.xml", "json": plan_dir / "result.json",
+                                     "log": plan_dir / "log.mcap"}))
+            counts = result.counts()
+            print(f"{result.outcome.value:8s} {plan.name}: {result.reason} "
+                  f"[{counts.get('PASS', 0)} pass, {counts.get('MARGINAL', 0)} marginal, "
+                  f"{counts.get('FAIL', 0)} fail] ({result.sim_duration_s:.3f} s simulated in "
+                  f"{result.wall_duration_s:.1f} s)")
+            if result.outcome is Outcome.ABORTED:
+                exit_code = 2
+                break
+            if result.outcome is Outcome.ERROR:
+                exit_code = 2
+            elif not result.outcome.passed and exit_code == 0:
+                exit_code = 1
+    finally:
+        if bar is not None:
+            bar.stop()
+        if entries:
+            write_summary(entries, out)
+            print(f"reports: {out / 'index.html'} (JUnit: {out / 'junit.xml'})")
+    return exit_code
+
+
+def skipped_remainder(plan: Plan, done_steps: list[StepResult],
+                      done_checks: list[CheckResult], why: str) -> tuple[list[StepResult], list[CheckResult]]:
+    """Steps and checks a plan never reached (it ended early), as SKIPPED results.
+
+    The reports still list every check of the plan, so a CI system shows the
+    checks that did not run instead of silently dropping them.
+    """
+    reached = {s.index for s in done_steps}
+    checked = {c.name for c in done_checks}
+    steps: list[StepResult] = []
+    checks: list[CheckResult] = []
+    for step in plan.steps:
+        if step.index in reached:
+            continue
+        steps.append(StepResult(step.index, step.kind, Outcome.SKIPPED, step.line, message=why))
+        if isinstance(step, CheckStep) and step.name not in checked:
+            unit = step.limits.unit if step.limits is not None else ""
+            checks.append(CheckResult(step.name, step.check_kind, Outcome.SKIPPED, None, unit,
+                                      step.limits, f"not evaluated: {why}",
+                                      signals=step.signals, line=step.line))
+    return steps, checks
