@@ -94,6 +94,10 @@ class ParamId(IntEnum):
     OVERCURRENT_A = 41
     ENCODER_LOSS_TIMEOUT_S = 42
     CONTROL_STEP_CYCLES = 50  # read-only: cycles of the last control step on target
+    CONTROL_LAW = 60  # 0: DTC (answers GATES), 1: FOC (answers DUTY)
+    CURRENT_BANDWIDTH_HZ = 61  # FOC d-q current loop bandwidth
+    FOC_ANGLE_SOURCE = 62  # FOC rotor angle: 0 encoder, 1 EKF
+    DEAD_TIME_COMP_S = 63  # FOC dead-time compensation by current sign, 0 = off
 
 
 # HELLO capability bits

@@ -170,9 +170,18 @@ static void on_sample(hil_stub *s, const hil_sample *sample)
         s->core.st.step_cycles = s->read_cycles() - c0;
     }
     hil_msg g;
-    g.type = HIL_MSG_GATES;
-    g.u.gates.period = sample->period;
-    g.u.gates.gates = gates;
+    if (s->core.st.answer_duty) {
+        /* FOC while running: centre-aligned PWM duties (SPEC.md 6.4) */
+        g.type = HIL_MSG_DUTY;
+        g.u.duty.period = sample->period;
+        g.u.duty.duty[0] = s->core.st.duty[0];
+        g.u.duty.duty[1] = s->core.st.duty[1];
+        g.u.duty.duty[2] = s->core.st.duty[2];
+    } else {
+        g.type = HIL_MSG_GATES;
+        g.u.gates.period = sample->period;
+        g.u.gates.gates = gates;
+    }
     emit(s, &g);
     if (want_telemetry) {
         m.type = HIL_MSG_TELEMETRY;
@@ -216,7 +225,7 @@ static void emit_hello(hil_stub *s)
     m.type = HIL_MSG_HELLO;
     m.u.hello.proto_version = HIL_PROTO_VERSION;
     m.u.hello.role = HIL_ROLE_CONTROLLER;
-    m.u.hello.capabilities = HIL_CAP_GATES | HIL_CAP_TELEMETRY | HIL_CAP_CAN;
+    m.u.hello.capabilities = HIL_CAP_GATES | HIL_CAP_DUTY | HIL_CAP_TELEMETRY | HIL_CAP_CAN;
     m.u.hello.control_period_ns = (uint32_t)(s->core.params.control_period_s * 1e9f + 0.5f);
     m.u.hello.name_len = (uint8_t)name_len;
     memcpy(m.u.hello.name, stub_name, name_len);

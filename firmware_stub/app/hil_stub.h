@@ -4,7 +4,8 @@
  * frames) to send. No I/O, no allocation, no clock: the host executable, the
  * shared library (ctypes) and the Cortex-M4F board port all call these
  * functions, typically once per control period with one SAMPLE frame in and
- * GATES (+ TELEMETRY every HIL_PARAM_TELEMETRY_DIVIDER periods) out.
+ * GATES, or DUTY when HIL_PARAM_CONTROL_LAW selects FOC and the drive runs
+ * (+ TELEMETRY every HIL_PARAM_TELEMETRY_DIVIDER periods) out.
  *
  * The instance is an opaque block of hil_stub_instance_size() bytes, aligned
  * to 8 bytes, owned by the caller.

@@ -47,6 +47,10 @@ void ctl_params_default(ctl_params *p)
     p->overcurrent_a = CTL_DEFAULT_OVERCURRENT_A;
     p->encoder_loss_timeout_s = CTL_DEFAULT_ENCODER_LOSS_TIMEOUT_S;
     p->encoder_loss_min_speed_rad_s = CTL_DEFAULT_ENCODER_LOSS_MIN_SPEED_RAD_S;
+    p->control_law = CTL_DEFAULT_CONTROL_LAW;
+    p->current_bandwidth_hz = CTL_DEFAULT_CURRENT_BANDWIDTH_HZ;
+    p->foc_angle_source = CTL_DEFAULT_FOC_ANGLE_SOURCE;
+    p->dead_time_comp_s = CTL_DEFAULT_DEAD_TIME_COMP_S;
 }
 
 void ctl_derive(ctl *c)
@@ -102,6 +106,19 @@ void ctl_derive(ctl *c)
     k->prot.encoder_loss_min_speed_rad_s = p->encoder_loss_min_speed_rad_s;
     k->prot.control_period_s = t;
     prot_derive(&k->prot);
+
+    /* FOC current-loop gains follow R, Ls and the bandwidth (current_pi.h) */
+    k->foc.current.bandwidth_hz = p->current_bandwidth_hz;
+    k->foc.current.stator_resistance_ohm = p->stator_resistance_ohm;
+    k->foc.current.stator_inductance_h = p->stator_inductance_h;
+    k->foc.current.magnet_flux_wb = p->magnet_flux_wb;
+    k->foc.pwm.dead_time_comp_s = p->dead_time_comp_s;
+    k->foc.pwm.comp_band_a = CTL_DESIGN_DEAD_TIME_COMP_BAND_A;
+    k->foc.pole_pairs = p->pole_pairs;
+    k->foc.control_period_s = t;
+    foc_derive(&k->foc);
+    k->control_law = p->control_law;
+    k->foc_angle_source = p->foc_angle_source;
 
     k->vdc_v_per_count = p->vdc_v_per_count;
     k->vdc_offset_counts = p->vdc_offset_counts;
@@ -194,6 +211,29 @@ static void track_encoder(ctl *c, const clarke_out *i)
     ekf_reset(&st->ekf, theta, speed_e);
 }
 
+/* FOC (foc.h) on the encoder angle, or sensorless on the EKF's flux angle
+ * minus the eq. (25) load angle (eq. (26)); the speed loop's feedback, in
+ * electrical rad/s, feeds the decoupling. Answers DUTY. */
+static void foc_law(ctl *c, const clarke_out *i, float torque_est, float flux_mag, float vdc_v, float torque_ref,
+                    float speed_mech)
+{
+    const ctl_cfg *k = &c->cfg;
+    ctl_state *st = &c->st;
+    float theta_e;
+    if (k->foc_angle_source == CTL_FOC_ANGLE_EKF) {
+        theta_e = st->ekf.theta_filtered_rad - rotor_load_angle(&k->rotor, torque_est, flux_mag);
+    } else {
+        theta_e = enc_angle_e(&k->enc, &st->enc);
+    }
+    float duty[3];
+    foc_step(&k->foc, &st->foc, theta_e, speed_mech * k->pole_pairs, i->i_alpha_a, i->i_beta_a, torque_ref, vdc_v,
+             duty);
+    st->duty[0] = svpwm_duty_u16(duty[0]);
+    st->duty[1] = svpwm_duty_u16(duty[1]);
+    st->duty[2] = svpwm_duty_u16(duty[2]);
+    st->answer_duty = 1u;
+}
+
 static float clamp_abs(float v, float lim) { return v > lim ? lim : (v < -lim ? -lim : v); }
 
 uint8_t ctl_step(ctl *c, const hil_sample *s, hil_telemetry *tm)
@@ -216,10 +256,16 @@ uint8_t ctl_step(ctl *c, const hil_sample *s, hil_telemetry *tm)
     }
     if (running) {
         float ua, ub;
-        vsi_voltage_of_vector(st->vector_prev, vdc_v, &ua, &ub);
+        if (k->control_law == CTL_LAW_FOC) {
+            ua = st->foc.u_alpha_v; /* the average voltage the SVPWM applied */
+            ub = st->foc.u_beta_v;
+        } else {
+            vsi_voltage_of_vector(st->vector_prev, vdc_v, &ua, &ub);
+        }
         fluxobs_step(&k->flux, &st->flux, ua, ub, i.i_alpha_a, i.i_beta_a);
     } else {
         track_encoder(c, &i);
+        foc_reset(&st->foc);
     }
     float pa = st->flux.psi_alpha_wb;
     float pb = st->flux.psi_beta_wb;
@@ -238,6 +284,7 @@ uint8_t ctl_step(ctl *c, const hil_sample *s, hil_telemetry *tm)
     uint8_t vector = 0u;
     uint8_t sector = 0u;
     float torque_ref = 0.0f;
+    st->answer_duty = 0u;
     if (st->state == HIL_STATE_RUNNING) {
         float value = 0.0f;
         uint8_t fault = prot_hardware(&k->prot, i.i_peak_a, vdc_v, s->status, &value);
@@ -253,10 +300,14 @@ uint8_t ctl_step(ctl *c, const hil_sample *s, hil_telemetry *tm)
             } else {
                 torque_ref = spi_step(&k->pi, &st->pi, c->cmd.speed_ref_rad_s, feedback);
             }
-            uint8_t flux_up = hyst_step(&k->flux_hyst, &st->flux_hyst, c->flux_ref_wb, mag);
-            uint8_t torque_up = hyst_step(&k->torque_hyst, &st->torque_hyst, torque_ref, torque);
             sector = swtab_sector_of_angle(theta_s);
-            vector = k->vector_of[sector][(flux_up ? 0u : 2u) + (torque_up ? 0u : 1u)]; /* Table 3 */
+            if (k->control_law == CTL_LAW_FOC) {
+                foc_law(c, &i, torque, mag, vdc_v, torque_ref, feedback);
+            } else {
+                uint8_t flux_up = hyst_step(&k->flux_hyst, &st->flux_hyst, c->flux_ref_wb, mag);
+                uint8_t torque_up = hyst_step(&k->torque_hyst, &st->torque_hyst, torque_ref, torque);
+                vector = k->vector_of[sector][(flux_up ? 0u : 2u) + (torque_up ? 0u : 1u)]; /* Table 3 */
+            }
         }
     }
     st->vector_prev = vector;
@@ -271,7 +322,7 @@ uint8_t ctl_step(ctl *c, const hil_sample *s, hil_telemetry *tm)
     tm->sector = sector;
     tm->speed_source = source;
     tm->state = st->state;
-    tm->gates = gates;
+    tm->gates = st->answer_duty ? CTL_GATES_PWM : gates;
     tm->speed_feedback_rad_s = feedback;
     tm->speed_encoder_rad_s = st->enc.speed_rad_s;
     tm->speed_raw_rad_s = st->conv.speed_raw_rad_s * ip;
@@ -328,6 +379,10 @@ static const param_desc param_table[] = {
     P(HIL_PARAM_TELEMETRY_DIVIDER, telemetry_divider, PT_U32, 1, 0.0f, 1e6f),
     P(HIL_PARAM_OVERCURRENT_A, overcurrent_a, PT_F32, 0, 0.0f, 1e4f),
     P(HIL_PARAM_ENCODER_LOSS_TIMEOUT_S, encoder_loss_timeout_s, PT_F32, 0, 1e-4f, 100.0f),
+    P(HIL_PARAM_CONTROL_LAW, control_law, PT_U8, 1, 0.0f, 1.0f),
+    P(HIL_PARAM_CURRENT_BANDWIDTH_HZ, current_bandwidth_hz, PT_F32, 0, 1.0f, 1e5f),
+    P(HIL_PARAM_FOC_ANGLE_SOURCE, foc_angle_source, PT_U8, 1, 0.0f, 1.0f),
+    P(HIL_PARAM_DEAD_TIME_COMP_S, dead_time_comp_s, PT_F32, 0, 0.0f, 1e-5f),
 };
 
 #undef P

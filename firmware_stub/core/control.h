@@ -19,6 +19,7 @@
 #include "hil_proto.h"
 #include "clarke.h"
 #include "flux_observer.h"
+#include "foc.h"
 #include "hysteresis.h"
 #include "protection.h"
 #include "rotor_position.h"
@@ -58,7 +59,18 @@ typedef struct {
     float overcurrent_a;
     float encoder_loss_timeout_s;
     float encoder_loss_min_speed_rad_s;
+    uint8_t control_law;      /* ctl_law */
+    float current_bandwidth_hz; /* FOC current loop */
+    uint8_t foc_angle_source; /* ctl_foc_angle */
+    float dead_time_comp_s;   /* FOC, 0 = off */
 } ctl_params;
+
+/* HIL_PARAM_CONTROL_LAW: the paper's DTC answers GATES, FOC answers DUTY */
+typedef enum { CTL_LAW_DTC = 0, CTL_LAW_FOC = 1 } ctl_law;
+/* TELEMETRY gates while FOC modulates: every switch is pulse-width modulated */
+#define CTL_GATES_PWM 0x3Fu
+/* HIL_PARAM_FOC_ANGLE_SOURCE: the rotor angle of the Park transforms */
+typedef enum { CTL_FOC_ANGLE_ENCODER = 0, CTL_FOC_ANGLE_EKF = 1 } ctl_foc_angle;
 
 /* Block configurations derived from ctl_params by ctl_derive(). */
 typedef struct {
@@ -72,6 +84,9 @@ typedef struct {
     ekf_cfg ekf;
     rotor_cfg rotor;
     prot_cfg prot;
+    foc_cfg foc;
+    uint8_t control_law;
+    uint8_t foc_angle_source;
     float vdc_v_per_count;
     float vdc_offset_counts;
     float pole_pairs;
@@ -102,6 +117,9 @@ typedef struct {
     conv_state conv;
     ekf_state ekf;
     prot_state prot;
+    foc_state foc;
+    uint16_t duty[3];   /* FOC: the DUTY answer when answer_duty */
+    uint8_t answer_duty; /* 1: answer this SAMPLE with DUTY (duty[]), 0: with GATES */
     uint8_t started;    /* first SAMPLE seen */
     uint8_t vector_prev; /* voltage vector 0..6 applied during the period that just ended */
     uint8_t state;      /* hil_state */
@@ -133,7 +151,9 @@ int ctl_set_command(ctl *c, const hil_command *cmd);
 /* Latches a fault: switches off from now on, state FAULT until disabled. */
 void ctl_trip(ctl *c, uint8_t fault_code, float value, uint32_t period);
 
-/* One control period. Returns the gates to apply until the next SAMPLE. With
+/* One control period. Returns the gates to apply until the next SAMPLE, or,
+ * when it leaves c->st.answer_duty at 1 (FOC while running), the duties in
+ * c->st.duty are the answer instead (the return value is then 0). With
  * tm not NULL, also fills every telemetry field, including the telemetry-only
  * rotor position of eq. (24)-(26); the estimators run every step either way. */
 uint8_t ctl_step(ctl *c, const hil_sample *s, hil_telemetry *tm);

@@ -33,6 +33,13 @@
 #define CTL_DEFAULT_ENCODER_LOSS_TIMEOUT_S 0.01f
 #define CTL_DEFAULT_ENCODER_LOSS_MIN_SPEED_RAD_S 10.0f
 
+/* FOC (docs/stub.md, FOC section) */
+#define CTL_DEFAULT_CONTROL_LAW 0u           /* the paper's DTC */
+#define CTL_DEFAULT_CURRENT_BANDWIDTH_HZ 1000.0f /* 1/20 of the 20 kHz sampling rate: 63 deg phase margin even with one period of computation delay */
+#define CTL_DEFAULT_FOC_ANGLE_SOURCE 0u      /* encoder */
+#define CTL_DEFAULT_DEAD_TIME_COMP_S 0.0f    /* the paper's plant has no dead time */
+#define CTL_DESIGN_DEAD_TIME_COMP_BAND_A 0.1f /* linear zone of sign(i): 8 ADC counts, 16x the 0.5-count noise */
+
 /* python -m hil.ekf_design (DLQE by the discrete Riccati equation) for the
  * documented noise model: sigma_v = 0.0136077 rad of flux-angle ripple,
  * sigma_w = 0.00625 rad/s per period of speed-increment change; estimator

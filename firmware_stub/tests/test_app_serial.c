@@ -14,7 +14,7 @@ static void hello_answered_with_build_name(void **state)
     assert_int_equal(b.replies[0].type, HIL_MSG_HELLO);
     assert_int_equal(r->proto_version, HIL_PROTO_VERSION);
     assert_int_equal(r->role, HIL_ROLE_CONTROLLER);
-    assert_int_equal(r->capabilities, HIL_CAP_GATES | HIL_CAP_TELEMETRY | HIL_CAP_CAN);
+    assert_int_equal(r->capabilities, HIL_CAP_GATES | HIL_CAP_DUTY | HIL_CAP_TELEMETRY | HIL_CAP_CAN);
     assert_int_equal(r->control_period_ns, 50000u);
     assert_true(r->name_len <= HIL_NAME_MAX);
     assert_int_equal(r->name_len, strlen(hil_stub_name()));

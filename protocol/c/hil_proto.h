@@ -119,7 +119,11 @@ typedef enum {
     HIL_PARAM_TELEMETRY_DIVIDER = 40,
     HIL_PARAM_OVERCURRENT_A = 41,
     HIL_PARAM_ENCODER_LOSS_TIMEOUT_S = 42,
-    HIL_PARAM_CONTROL_STEP_CYCLES = 50 /* read-only: cycles of the last control step on target (SysTick) */
+    HIL_PARAM_CONTROL_STEP_CYCLES = 50, /* read-only: cycles of the last control step on target (SysTick) */
+    HIL_PARAM_CONTROL_LAW = 60,         /* 0: DTC (the paper's, answers GATES), 1: FOC (answers DUTY) */
+    HIL_PARAM_CURRENT_BANDWIDTH_HZ = 61, /* FOC d-q current loop bandwidth */
+    HIL_PARAM_FOC_ANGLE_SOURCE = 62,    /* FOC rotor angle: 0 encoder, 1 EKF (eq. (21) minus eq. (25)) */
+    HIL_PARAM_DEAD_TIME_COMP_S = 63     /* FOC dead-time compensation by current sign, 0 = off */
 } hil_param_id;
 
 typedef struct {
