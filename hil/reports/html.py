@@ -29,8 +29,6 @@ from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
 
 from hil.plans.limits import Limits
 from hil.plans.outcome import CheckResult, Outcome, PlanResult
@@ -156,14 +154,20 @@ def _decimate(t: np.ndarray, y: np.ndarray, max_points: int = MAX_PLOT_POINTS) -
     return np.concatenate([tt, t[m:]]), np.concatenate([yy, y[m:]])
 
 
-def _png(fig: Figure) -> str:
+def _png(fig) -> str:
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
     FigureCanvasAgg(fig)
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=90)
     return base64.b64encode(buf.getvalue()).decode("ascii")
 
 
-def _new_figure(width: float = 7.5, height: float = 3.0) -> Figure:
+def _new_figure(width: float = 7.5, height: float = 3.0):
+    # matplotlib is imported when a figure is drawn, not when the module is (0.3 s of every
+    # `hil run` start-up otherwise, and sweeps start thousands of runs).
+    from matplotlib.figure import Figure
+
     # Fixed margins: matplotlib's constrained layout draws every artist an extra
     # time to measure it, which doubled the cost of a report.
     fig = Figure(figsize=(width, height))
