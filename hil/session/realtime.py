@@ -35,17 +35,33 @@ from protocol.messages import Duty, Gates, Sample
 from hil.session.errors import SessionError
 
 
+#: Lateness thresholds as fractions of the period, and what each means for a control loop:
+#: a tick 10 % late eats into the board's computation time; 50 % late leaves the board half a
+#: period for its step (a typical firmware budget); a whole period late is a lost period
+#: (a deadline miss: the plant held the previous switches for two periods).
+LATENESS_THRESHOLDS = {"late_over_10pct": 0.1, "late_over_50pct": 0.5, "deadline_misses": 1.0}
+
+
 def lateness_summary(lateness_s: np.ndarray, period_s: float) -> dict:
     if lateness_s.size == 0:
         return {"periods": 0}
     us = lateness_s * 1e6
-    return {
+    out = {
         "periods": int(us.size),
         "lateness_us_p50": float(np.percentile(us, 50)),
         "lateness_us_p99": float(np.percentile(us, 99)),
         "lateness_us_max": float(us.max()),
-        "deadline_misses": int(np.count_nonzero(lateness_s > period_s)),
     }
+    for key, fraction in LATENESS_THRESHOLDS.items():
+        out[key] = int(np.count_nonzero(lateness_s > fraction * period_s))
+    return out
+
+
+def held(stats: dict) -> bool:
+    """The clock held its period: no tick more than half a period late, no answer missing,
+    no overrun (a period whose own work took longer than the period)."""
+    return (stats.get("periods", 0) > 0 and stats.get("late_over_50pct", 1) == 0
+            and stats.get("missing_answers", 1) == 0 and stats.get("overruns", 1) == 0)
 
 
 def run_realtime(session, count: int, stop: Callable[[], bool] | None = None,
@@ -146,7 +162,7 @@ def run_realtime(session, count: int, stop: Callable[[], bool] | None = None,
 def _store(stats: dict, lateness: list[float], period_s: float, late_answers: int, missing: int,
            overruns: int) -> None:
     summary = lateness_summary(np.asarray(lateness), period_s)
-    for key in ("periods", "deadline_misses"):
+    for key in ("periods", *LATENESS_THRESHOLDS):
         stats[key] = stats.get(key, 0) + summary.get(key, 0)
     for key in ("lateness_us_p50", "lateness_us_p99"):
         if key in summary:
