@@ -138,6 +138,11 @@ def run(quick: bool = False) -> dict:
         at_divider = instructions_per_step(mode, steps, DEFAULT_TELEMETRY_DIVIDER)
         per_mode[name] = {"with_telemetry": every, "without_telemetry": never,
                           f"telemetry_every_{DEFAULT_TELEMETRY_DIVIDER}": at_divider}
+    # the FOC law (step_driver MODE 3: encoder speed and angle), beside the DTC modes
+    per_mode["foc_encoder"] = {
+        "with_telemetry": instructions_per_step(3, steps, 1),
+        "without_telemetry": instructions_per_step(3, steps, 0),
+        f"telemetry_every_{DEFAULT_TELEMETRY_DIVIDER}": instructions_per_step(3, steps, DEFAULT_TELEMETRY_DIVIDER)}
     return {
         "instructions_per_control_step_x86_64": per_mode,
         "steps_counted": steps,

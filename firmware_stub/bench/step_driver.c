@@ -4,7 +4,8 @@
  * and its encoder) in one speed-source mode.
  *
  *   step_driver MODE STEPS [TELEMETRY_EVERY [baseline]]
- *     MODE 0 encoder, 1 conventional, 2 EKF; telemetry filled every
+ *     MODE 0 encoder, 1 conventional, 2 EKF (DTC); 3, 4, 5 the same sources
+ *     with the FOC law (HIL_PARAM_CONTROL_LAW 1, encoder angle); telemetry filled every
  *     TELEMETRY_EVERY steps (default 1: every step; 0: never); "baseline"
  *     runs the same program without calling ctl_step.
  *
@@ -43,8 +44,8 @@ int main(int argc, char **argv)
     int steps = atoi(argv[2]);
     int telemetry_every = argc >= 4 ? atoi(argv[3]) : 1;
     int baseline = argc == 5;
-    if (mode < 0 || mode > 2 || steps < 0 || steps > MAX_STEPS) {
-        fprintf(stderr, "step_driver: MODE in 0..2, STEPS in 0..%d\n", MAX_STEPS);
+    if (mode < 0 || mode > 5 || steps < 0 || steps > MAX_STEPS) {
+        fprintf(stderr, "step_driver: MODE in 0..5, STEPS in 0..%d\n", MAX_STEPS);
         return 2;
     }
     const double w = 150.0, t = 50e-6, amps = 8.0, a_per_count = 0.01220703125;
@@ -61,8 +62,9 @@ int main(int argc, char **argv)
     static ctl c;
     ctl_init(&c);
     c.params.overcurrent_a = 1e3f; /* the synthetic currents are not a motor's: keep it running */
+    c.params.control_law = mode >= 3 ? CTL_LAW_FOC : CTL_LAW_DTC;
     ctl_derive(&c);
-    hil_command cmd = {HIL_CMD_ENABLE, (uint8_t)mode, 150.0f, 0.0f, 0.0f};
+    hil_command cmd = {HIL_CMD_ENABLE, (uint8_t)(mode % 3), 150.0f, 0.0f, 0.0f};
     if (ctl_set_command(&c, &cmd) != 0) {
         return 1;
     }
