@@ -4,7 +4,7 @@
  * stream must yield the recorded messages and counters. Plus the C-only
  * contract: buffer limits, untouched outputs on error, the CRC check value.
  *
- * usage: test_vectors [path/to/vectors.txt]
+ * usage: test_vectors [VECTOR_FILE...]   (default: ../vectors/vectors.txt ../vectors/handbuilt.txt)
  */
 #include <setjmp.h>
 #include <stdarg.h>
@@ -19,7 +19,8 @@
 #include "../hil_proto.h"
 #include "vectors.h"
 
-static vec_file g_vectors;
+#define MAX_FILES 8
+static vec_file g_files[MAX_FILES];
 
 static void assert_msg_equal(const hil_msg *got, const hil_msg *want)
 {
@@ -151,7 +152,7 @@ static void test_serial_stream(void **state)
         hil_msg got;
         if (hil_decoder_feed(&dec, s->bytes[i], &got)) {
             assert_true(yielded < s->yield_count);
-            assert_msg_equal(&got, &g_vectors.messages[s->yields[yielded]].msg);
+            assert_msg_equal(&got, &s->messages[s->yields[yielded]].msg);
             yielded++;
         }
         assert_true(dec.len <= sizeof dec.buf);
@@ -170,7 +171,7 @@ static void test_serial_stream(void **state)
         at += hil_decoder_feed_buf(&dec, s->bytes + at, s->len - at, &got, &done);
         if (done) {
             assert_true(yielded < s->yield_count);
-            assert_msg_equal(&got, &g_vectors.messages[s->yields[yielded]].msg);
+            assert_msg_equal(&got, &s->messages[s->yields[yielded]].msg);
             yielded++;
         }
     }
@@ -189,7 +190,7 @@ static void test_can_stream(void **state)
         uint8_t role = 0xFF;
         if (hil_can_rx_feed(&rx, &s->frames[i], &got, &role)) {
             assert_true(yielded < s->yield_count);
-            assert_msg_equal(&got, &g_vectors.messages[s->yields[yielded]].msg);
+            assert_msg_equal(&got, &s->messages[s->yields[yielded]].msg);
             assert_int_equal(role, s->yield_roles[yielded]);
             yielded++;
         }
@@ -384,9 +385,17 @@ static void test_dlc_above_8_is_a_length_error(void **state)
 
 int main(int argc, char **argv)
 {
-    const char *path = argc > 1 ? argv[1] : "../vectors/vectors.txt";
-    if (vec_load(path, &g_vectors) != 0) {
+    static const char *const defaults[] = {"../vectors/vectors.txt", "../vectors/handbuilt.txt"};
+    const char *const *paths = argc > 1 ? (const char *const *)(argv + 1) : defaults;
+    size_t nfiles = argc > 1 ? (size_t)(argc - 1) : 2u;
+    if (nfiles > MAX_FILES) {
+        fprintf(stderr, "at most %d vector files\n", MAX_FILES);
         return 2;
+    }
+    for (size_t f = 0; f < nfiles; f++) {
+        if (vec_load(paths[f], &g_files[f]) != 0) {
+            return 2;
+        }
     }
     const struct CMUnitTest unit[] = {
         cmocka_unit_test(test_crc_check_value),
@@ -399,30 +408,38 @@ int main(int argc, char **argv)
     };
     int failed = cmocka_run_group_tests_name("codec", unit, NULL, NULL);
 
-    size_t n = g_vectors.message_count + g_vectors.stream_count;
+    size_t n = 0;
+    for (size_t f = 0; f < nfiles; f++) {
+        n += g_files[f].message_count + g_files[f].stream_count;
+    }
     struct CMUnitTest *tests = calloc(n, sizeof *tests);
     char(*names)[VEC_NAME_MAX + 16] = calloc(n, sizeof *names);
     if (tests == NULL || names == NULL) {
         return 2;
     }
     size_t k = 0;
-    for (size_t i = 0; i < g_vectors.message_count; i++, k++) {
-        vec_message *v = &g_vectors.messages[i];
-        snprintf(names[k], sizeof names[k], "%s %s", v->is_reject ? "reject" : "message", v->name);
-        tests[k].name = names[k];
-        tests[k].test_func = v->is_reject ? test_reject : test_message;
-        tests[k].initial_state = v;
-    }
-    for (size_t i = 0; i < g_vectors.stream_count; i++, k++) {
-        vec_stream *s = &g_vectors.streams[i];
-        snprintf(names[k], sizeof names[k], "%s %s", s->is_can ? "can_stream" : "serial_stream", s->name);
-        tests[k].name = names[k];
-        tests[k].test_func = s->is_can ? test_can_stream : test_serial_stream;
-        tests[k].initial_state = s;
+    for (size_t f = 0; f < nfiles; f++) {
+        const vec_file *vf = &g_files[f];
+        for (size_t i = 0; i < vf->message_count; i++, k++) {
+            vec_message *v = &vf->messages[i];
+            snprintf(names[k], sizeof names[k], "%s %s", v->is_reject ? "reject" : "message", v->name);
+            tests[k].name = names[k];
+            tests[k].test_func = v->is_reject ? test_reject : test_message;
+            tests[k].initial_state = v;
+        }
+        for (size_t i = 0; i < vf->stream_count; i++, k++) {
+            vec_stream *s = &vf->streams[i];
+            snprintf(names[k], sizeof names[k], "%s %s", s->is_can ? "can_stream" : "serial_stream", s->name);
+            tests[k].name = names[k];
+            tests[k].test_func = s->is_can ? test_can_stream : test_serial_stream;
+            tests[k].initial_state = s;
+        }
     }
     failed += _cmocka_run_group_tests("vectors", tests, n, NULL, NULL);
     free(names);
     free(tests);
-    vec_free(&g_vectors);
+    for (size_t f = 0; f < nfiles; f++) {
+        vec_free(&g_files[f]);
+    }
     return failed == 0 ? 0 : 1;
 }

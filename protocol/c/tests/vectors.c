@@ -197,8 +197,77 @@ static int set_field(hil_msg *msg, char **words, int nwords, where w)
     return fail(w, "no such field for this type", words[1]);
 }
 
+uint16_t spec_crc16(const uint8_t *data, size_t n)
+{
+    uint16_t crc = 0xFFFFu;
+    for (size_t i = 0; i < n; i++) {
+        crc = (uint16_t)(crc ^ (uint16_t)(data[i] << 8));
+        for (int b = 0; b < 8; b++) {
+            crc = (crc & 0x8000u) ? (uint16_t)((crc << 1) ^ 0x1021u) : (uint16_t)(crc << 1);
+        }
+    }
+    return crc;
+}
+
+size_t spec_cobs(const uint8_t *in, size_t n, uint8_t *out)
+{
+    size_t code_at = 0, o = 1;
+    uint8_t code = 1;
+    for (size_t i = 0; i < n; i++) {
+        if (in[i] == 0) {
+            out[code_at] = code;
+            code_at = o++;
+            code = 1;
+        } else {
+            out[o++] = in[i];
+            code++;
+        }
+    }
+    out[code_at] = code;
+    out[o++] = 0;
+    return o;
+}
+
+/* words[from..n-1] joined into one hex string ("40 e2 01 00" -> "40e20100") */
+static const char *join_hex(char **words, int from, int n, char *buf, size_t cap)
+{
+    size_t len = 0;
+    buf[0] = '\0';
+    for (int i = from; i < n; i++) {
+        size_t add = strlen(words[i]);
+        if (len + add + 1u > cap) {
+            return "x"; /* too long: parse_hex refuses it */
+        }
+        memcpy(buf + len, words[i], add + 1u);
+        len += add;
+    }
+    return buf;
+}
+
+/* A 'crc' or 'badcrc' line for raw[0..len): checks it with spec_crc16 and writes the two bytes. */
+static int crc_line(char **words, int n, const uint8_t *raw, size_t len, uint8_t crc[2], where w)
+{
+    char hex[64];
+    if (len == 0u || parse_hex(join_hex(words, 1, n, hex, sizeof hex), crc, 2) != 2) {
+        return fail(w, "needs two CRC bytes after some 'raw' bytes", words[0]);
+    }
+    uint16_t right = spec_crc16(raw, len);
+    int matches = crc[0] == (uint8_t)right && crc[1] == (uint8_t)(right >> 8);
+    int want = strcmp(words[0], "crc") == 0;
+    if (matches != want) {
+        char detail[48];
+        snprintf(detail, sizeof detail, "the CRC of the raw bytes is %02x %02x", right & 0xFFu, right >> 8);
+        return fail(w, want ? "wrong 'crc' line" : "'badcrc' line is the right CRC", detail);
+    }
+    return 0;
+}
+
 static int split(char *line, char **words, int max)
 {
+    char *hash = strchr(line, '#');
+    if (hash != NULL) {
+        *hash = '\0';
+    }
     int n = 0;
     for (char *tok = strtok(line, " \t\r\n"); tok != NULL && n < max; tok = strtok(NULL, " \t\r\n")) {
         words[n++] = tok;
@@ -239,15 +308,18 @@ int vec_load(const char *path, vec_file *vf)
         return -1;
     }
     char line[4096];
-    char *words[16];
+    char hex[4096];
+    char *words[96];
+    uint8_t pending[HIL_MAX_RAW_FRAME + 2]; /* a stream's raw frame being built */
+    size_t pending_len = 0;
     vec_message *m = NULL;
     vec_stream *s = NULL;
     where w = {path, 0};
     int rc = 0;
     while (rc == 0 && fgets(line, sizeof line, f) != NULL) {
         w.line++;
-        int n = split(line, words, 16);
-        if (n == 0 || words[0][0] == '#') {
+        int n = split(line, words, 96);
+        if (n == 0) {
             continue;
         }
         if (m == NULL && s == NULL) {
@@ -303,6 +375,10 @@ int vec_load(const char *path, vec_file *vf)
             continue;
         }
         if (strcmp(words[0], "end") == 0) {
+            if (pending_len != 0u) {
+                rc = fail(w, "'raw' bytes without a 'crc' or 'badcrc' line", NULL);
+                break;
+            }
             if (m != NULL && !m->is_reject) {
                 m->can_msg = m->can_msg.type ? m->can_msg : m->msg;
             }
@@ -313,14 +389,24 @@ int vec_load(const char *path, vec_file *vf)
         if (m != NULL) {
             if (strcmp(words[0], "field") == 0 && n >= 3) {
                 rc = set_field(&m->msg, words, n, w);
+            } else if (strcmp(words[0], "raw") == 0 && n >= 2) {
+                long len = parse_hex(join_hex(words, 1, n, hex, sizeof hex), m->raw + m->raw_len,
+                                     sizeof m->raw - m->raw_len);
+                rc = len < 0 ? fail(w, "bad raw bytes", NULL) : 0;
+                m->raw_len += (size_t)(len < 0 ? 0 : len);
+            } else if (strcmp(words[0], "crc") == 0) {
+                uint8_t frame[HIL_MAX_RAW_FRAME + 2];
+                memcpy(frame, m->raw, m->raw_len);
+                rc = crc_line(words, n, m->raw, m->raw_len, frame + m->raw_len, w);
+                m->serial_len = rc == 0 ? spec_cobs(frame, m->raw_len + 2u, m->serial) : 0u;
             } else if (strcmp(words[0], "serial") == 0 && n == 2) {
                 long len = parse_hex(words[1], m->serial, sizeof m->serial);
                 rc = len < 0 ? fail(w, "bad serial bytes", NULL) : 0;
                 m->serial_len = (size_t)(len < 0 ? 0 : len);
-            } else if (strcmp(words[0], "can") == 0 && n == 3 && m->can_count < VEC_MAX_CAN) {
+            } else if (strcmp(words[0], "can") == 0 && n >= 3 && m->can_count < VEC_MAX_CAN) {
                 hil_can_frame *cf = &m->can[m->can_count++];
                 unsigned long id;
-                long len = parse_hex(words[2], cf->data, 8);
+                long len = parse_hex(join_hex(words, 2, n, hex, sizeof hex), cf->data, 8);
                 if (parse_ulong(words[1], 0x7FF, &id) != 0 || len < 0) {
                     rc = fail(w, "bad CAN frame", NULL);
                 }
@@ -336,17 +422,34 @@ int vec_load(const char *path, vec_file *vf)
                 rc = fail(w, "unexpected line in message", words[0]);
             }
         } else {
-            if (strcmp(words[0], "bytes") == 0 && n == 2 && !s->is_can) {
-                size_t add = strlen(words[1]) / 2u;
-                uint8_t *p = realloc(s->bytes, s->len + add + 1u);
-                if (p == NULL || parse_hex(words[1], p + s->len, add) != (long)add) {
-                    rc = fail(w, "bad bytes", NULL);
+            const uint8_t *add_bytes = NULL; /* bytes to append to a serial stream */
+            size_t add_len = 0;
+            uint8_t frame[HIL_MAX_ENCODED_FRAME + 2];
+            uint8_t parsed[2048];
+            if (strcmp(words[0], "bytes") == 0 && n >= 2 && !s->is_can) {
+                long len = parse_hex(join_hex(words, 1, n, hex, sizeof hex), parsed, sizeof parsed);
+                rc = len < 0 ? fail(w, "bad bytes", NULL) : 0;
+                add_bytes = parsed;
+                add_len = (size_t)(len < 0 ? 0 : len);
+            } else if (strcmp(words[0], "wire") == 0 && n == 2 && !s->is_can) {
+                long k = find_message(vf, words[1]);
+                if (k < 0) {
+                    rc = fail(w, "wire: no such message above", words[1]);
+                } else {
+                    add_bytes = vf->messages[k].serial;
+                    add_len = vf->messages[k].serial_len;
                 }
-                if (p != NULL) {
-                    s->bytes = p;
-                    s->len += add;
-                }
-            } else if (strcmp(words[0], "frame") == 0 && n == 3 && s->is_can) {
+            } else if (strcmp(words[0], "raw") == 0 && n >= 2 && !s->is_can) {
+                long len = parse_hex(join_hex(words, 1, n, hex, sizeof hex), pending + pending_len,
+                                     HIL_MAX_RAW_FRAME - pending_len);
+                rc = len < 0 ? fail(w, "bad raw bytes", NULL) : 0;
+                pending_len += (size_t)(len < 0 ? 0 : len);
+            } else if ((strcmp(words[0], "crc") == 0 || strcmp(words[0], "badcrc") == 0) && !s->is_can) {
+                rc = crc_line(words, n, pending, pending_len, pending + pending_len, w);
+                add_bytes = frame;
+                add_len = rc == 0 ? spec_cobs(pending, pending_len + 2u, frame) : 0u;
+                pending_len = 0;
+            } else if (strcmp(words[0], "frame") == 0 && n >= 3 && s->is_can) {
                 if (grow((void **)&s->frames, s->frame_count, sizeof *s->frames) != 0) {
                     rc = fail(w, "out of memory", NULL);
                     break;
@@ -354,7 +457,7 @@ int vec_load(const char *path, vec_file *vf)
                 hil_can_frame *cf = &s->frames[s->frame_count++];
                 memset(cf, 0, sizeof *cf);
                 unsigned long id;
-                long len = parse_hex(words[2], cf->data, 8);
+                long len = parse_hex(join_hex(words, 2, n, hex, sizeof hex), cf->data, 8);
                 if (parse_ulong(words[1], 0x7FF, &id) != 0 || len < 0) {
                     rc = fail(w, "bad CAN frame", NULL);
                 }
@@ -378,7 +481,20 @@ int vec_load(const char *path, vec_file *vf)
             } else {
                 rc = fail(w, "unexpected line in stream", words[0]);
             }
+            if (rc == 0 && add_len > 0u) {
+                uint8_t *p = realloc(s->bytes, s->len + add_len);
+                if (p == NULL) {
+                    rc = fail(w, "out of memory", NULL);
+                    break;
+                }
+                memcpy(p + s->len, add_bytes, add_len);
+                s->bytes = p;
+                s->len += add_len;
+            }
         }
+    }
+    for (size_t i = 0; i < vf->stream_count; i++) {
+        vf->streams[i].messages = vf->messages;
     }
     if (rc == 0 && (m != NULL || s != NULL)) {
         rc = fail(w, "record without 'end'", NULL);
