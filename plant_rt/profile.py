@@ -66,6 +66,9 @@ class BenchProfile:
     sensors: SensorParams = field(default_factory=SensorParams)
     initial: InitialState = field(default_factory=InitialState)
     controller: dict[str, float] = field(default_factory=dict)
+    # How the bench talks to the board (waits, resends, watchdog: protocol/SPEC.md 2.8). Not
+    # physics: plant_rt keeps it as data, the bench checks it (session_schema) and uses it.
+    session: dict[str, Any] = field(default_factory=dict)
     source: str = "<defaults>"
 
     @property
@@ -92,8 +95,9 @@ def profile_schema() -> dict:
     dataclass, `controller` a mapping whose names the bench checks."""
     hints = typing.get_type_hints(BenchProfile)
     sections = {name: nullable(dataclass_schema(hints[name]))
-                for name in SECTIONS if name != "controller"}
+                for name in SECTIONS if name not in ("controller", "session")}
     sections["controller"] = {"type": ["object", "null"]}
+    sections["session"] = {"type": ["object", "null"]}
     return obj(sections)
 
 
@@ -103,8 +107,13 @@ def default_profile_path() -> Path:
 
 def load_profile(path: str | Path | None = None,
                  overrides: dict[str, Any] | None = None,
-                 controller_names: ControllerNames = ControllerNames()) -> BenchProfile:
-    """Reads and validates a bench profile; raises configfile.ConfigError on a bad value."""
+                 controller_names: ControllerNames = ControllerNames(),
+                 session_schema: dict | None = None) -> BenchProfile:
+    """Reads and validates a bench profile; raises configfile.ConfigError on a bad value.
+
+    `controller_names` and `session_schema` are the bench's: which board parameters the
+    `controller` section may name, and the JSON Schema of the `session` section (without
+    it, `session` must be a mapping)."""
     path = Path(path) if path is not None else default_profile_path()
     doc = load_yaml(path)
     data = doc.data if doc.data is not None else {}
@@ -119,7 +128,10 @@ def load_profile(path: str | Path | None = None,
         _merge(data, overrides, (), marks)
     err = _error_factory(doc, marks)
     if isinstance(data, dict):
-        SchemaChecker(doc, error=err).check(profile_schema(), data)
+        schema = profile_schema()
+        if session_schema is not None:
+            schema["properties"]["session"] = nullable(session_schema)
+        SchemaChecker(doc, error=err).check(schema, data)
     return build_profile(data, _error_factory(doc, marks), doc.source, controller_names)
 
 
@@ -137,6 +149,10 @@ def build_profile(data: Any, err: Callable[[tuple, str], ConfigError],
             raise err((key,), f"unknown section (known: {', '.join(sorted(SECTIONS))})")
         if key == "controller":
             sections[key] = _controller(value, err, controller_names)
+        elif key == "session":
+            if value is not None and not isinstance(value, dict):
+                raise err((key,), "expected a mapping of session settings")
+            sections[key] = dict(value or {})
         else:
             sections[key] = _build(hints[key], value, (key,), err)
     profile = BenchProfile(**sections, source=source)

@@ -176,3 +176,24 @@ def test_the_plant_alone_takes_any_controller_name_but_checks_its_form(tmp_path)
     with pytest.raises(ConfigError, match="lower_snake_case") as info:
         load_profile(bad)
     assert info.value.line == 2 and info.value.key == "controller.My-Gain"
+
+
+def test_session_section_is_checked_against_the_spec_keys(tmp_path):
+    """SPEC 2.8's session settings live in the profile; the bench checks their names and
+    values with file, line and key, and fills the rest with the spec's defaults."""
+    from hil.session.policy import SessionPolicy
+
+    ok = write(tmp_path, """
+        session:
+          answer_resends: 1
+          require_capabilities: [TELEMETRY]
+    """)
+    policy = SessionPolicy.from_profile(load_bench_profile(ok))
+    assert policy.answer_resends == 1 and policy.require_capabilities == ("TELEMETRY",)
+    assert policy.watchdog_periods == 20 and policy.answer_wait_s(50e-6) == 0.1
+    expect_error(write(tmp_path, "session:\n  answer_resend: 1\n"),
+                 "did you mean 'answer_resends'", 2, "session.answer_resend")
+    expect_error(write(tmp_path, "session:\n  watchdog_s: -1\n"),
+                 "must be greater than 0", 2, "session.watchdog_s")
+    expect_error(write(tmp_path, "session:\n  require_capabilities: [PWM]\n"),
+                 "expected one of", 2, "session.require_capabilities[0]")

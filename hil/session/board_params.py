@@ -45,7 +45,11 @@ def board_parameters(profile) -> dict[str, float]:
 
 def load_bench_profile(path=None, overrides=None):
     """plant_rt.load_profile with the `controller` section checked against the board's
-    parameter names (file, line and key of an unknown or read-only one)."""
+    parameter names and the `session` section against SPEC 2.8's keys (file, line and key
+    of a bad one)."""
     from plant_rt.profile import load_profile
 
-    return load_profile(path, overrides, controller_names=CONTROLLER_NAMES)
+    from hil.session.policy import SESSION_SCHEMA
+
+    return load_profile(path, overrides, controller_names=CONTROLLER_NAMES,
+                        session_schema=SESSION_SCHEMA)
