@@ -1,0 +1,854 @@
+/*
+ * _hilcodec: the firmware's serial codec (hil_proto.c, unchanged) as a CPython extension, so the
+ * bench frames and decodes in the same C as the boards. protocol/ccodec.py is its front end and
+ * gives it the API of protocol/codec.py; the message objects are protocol/messages.py's own
+ * classes, built here directly.
+ *
+ * Why the CPython API and not cffi: the cost that matters is per frame, and most of it is making
+ * the Python message object. Here a decoded SAMPLE becomes a Sample by writing six slots of a
+ * freshly allocated instance (no __init__ call, no argument tuple); through cffi the C side
+ * cannot make Python objects, so every field would be read back from cdata in Python and the
+ * message built there (figures: python -m bench protocol, "codec_stream").
+ *
+ * This file is glue only: every byte is framed, checked and parsed by hil_proto.c. Anything the C
+ * encoder cannot take as is (a field of the wrong type or out of range, a subclass, a non-message)
+ * goes to the Python codec's encode_frame, which either encodes it the same way or raises the
+ * ProtocolError that names the field: one set of error messages.
+ *
+ * Counters: the C decoder's are uint32; after each feed they are moved into 64-bit totals here,
+ * so the Python-visible counters never wrap.
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <structmember.h>
+
+#include <string.h>
+
+#include "../hil_proto.h"
+
+#define NTYPES (HIL_MSG_SHUTDOWN + 1)
+#define MAX_FIELDS 17
+
+/* One message class of protocol/messages.py: its type object and the offsets of its slots. */
+typedef struct {
+    PyTypeObject *cls;
+    int nfields;
+    Py_ssize_t off[MAX_FIELDS];
+} msg_class;
+
+static msg_class classes[NTYPES];
+static PyObject *fallback_encode; /* protocol.codec.encode_frame */
+
+/* The fields of each message class, in the order protocol/messages.py declares them. */
+static const char *const field_names[NTYPES][MAX_FIELDS + 1] = {
+    [HIL_MSG_HELLO] = {"proto_version", "role", "capabilities", "control_period_ns", "name_len", "name", NULL},
+    [HIL_MSG_SAMPLE] = {"period", "adc_i1", "adc_i2", "adc_vdc", "encoder", "status", NULL},
+    [HIL_MSG_GATES] = {"period", "gates", NULL},
+    [HIL_MSG_DUTY] = {"period", "duty", NULL},
+    [HIL_MSG_COMMAND] = {"flags", "speed_source", "speed_ref_rad_s", "torque_ref_nm", "flux_ref_wb", NULL},
+    [HIL_MSG_TELEMETRY] = {"period", "sector", "speed_source", "state", "gates", "speed_feedback_rad_s",
+                           "speed_encoder_rad_s", "speed_raw_rad_s", "speed_lpf_rad_s", "speed_ekf_rad_s",
+                           "flux_angle_rad", "ekf_angle_rad", "flux_mag_wb", "torque_est_nm", "torque_ref_nm",
+                           "rotor_pos_conv_rad", "rotor_pos_ekf_rad", NULL},
+    [HIL_MSG_PARAM_SET] = {"id", "value", NULL},
+    [HIL_MSG_PARAM_GET] = {"id", NULL},
+    [HIL_MSG_PARAM_VALUE] = {"id", "status", "value", NULL},
+    [HIL_MSG_STATUS] = {"period", "state", "fault_code", NULL},
+    [HIL_MSG_FAULT] = {"period", "code", "value", NULL},
+    [HIL_MSG_HEARTBEAT] = {"counter", NULL},
+    [HIL_MSG_SHUTDOWN] = {NULL},
+};
+
+#define SLOT(obj, off) (*(PyObject **)((char *)(obj) + (off)))
+
+/* ------------------------------------------------------------------ setup */
+
+static int setup_class(int type, PyObject *cls)
+{
+    if (!PyType_Check(cls)) {
+        PyErr_Format(PyExc_TypeError, "message class for type %d is not a class", type);
+        return -1;
+    }
+    msg_class *mc = &classes[type];
+    int n = 0;
+    for (; field_names[type][n] != NULL; n++) {
+        PyObject *d = PyObject_GetAttrString(cls, field_names[type][n]);
+        if (d == NULL) {
+            return -1;
+        }
+        int ok = Py_IS_TYPE(d, &PyMemberDescr_Type) &&
+                 ((PyMemberDescrObject *)d)->d_member->type == T_OBJECT_EX &&
+                 ((PyMemberDescrObject *)d)->d_common.d_type == (PyTypeObject *)cls;
+        if (ok) {
+            mc->off[n] = ((PyMemberDescrObject *)d)->d_member->offset;
+        }
+        Py_DECREF(d);
+        if (!ok) {
+            PyErr_Format(PyExc_TypeError, "%s.%s is not a slot of the class itself",
+                         ((PyTypeObject *)cls)->tp_name, field_names[type][n]);
+            return -1;
+        }
+    }
+    Py_INCREF(cls);
+    Py_XSETREF(mc->cls, (PyTypeObject *)cls);
+    mc->nfields = n;
+    return 0;
+}
+
+PyDoc_STRVAR(setup_doc, "setup(classes, fallback_encode)\n\n"
+                        "classes: {type code: message class} (protocol.messages.MESSAGE_CLASSES);\n"
+                        "fallback_encode(msg, seq): the Python codec's encode_frame, for what C cannot take.");
+
+static PyObject *mod_setup(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *mapping, *fallback;
+    if (!PyArg_ParseTuple(args, "OO:setup", &mapping, &fallback)) {
+        return NULL;
+    }
+    for (int t = HIL_MSG_HELLO; t < NTYPES; t++) {
+        PyObject *key = PyLong_FromLong(t);
+        if (key == NULL) {
+            return NULL;
+        }
+        PyObject *cls = PyObject_GetItem(mapping, key);
+        Py_DECREF(key);
+        if (cls == NULL) {
+            return NULL;
+        }
+        int rc = setup_class(t, cls);
+        Py_DECREF(cls);
+        if (rc < 0) {
+            return NULL;
+        }
+    }
+    Py_INCREF(fallback);
+    Py_XSETREF(fallback_encode, fallback);
+    Py_RETURN_NONE;
+}
+
+static int ready(void)
+{
+    if (fallback_encode == NULL) {
+        PyErr_SetString(PyExc_RuntimeError, "_hilcodec.setup() was not called (import protocol.ccodec)");
+        return 0;
+    }
+    return 1;
+}
+
+/* ------------------------------------------------------------------ hil_msg -> message object */
+
+static PyObject *new_message(int type)
+{
+    PyTypeObject *cls = classes[type].cls;
+    return cls->tp_alloc(cls, 0);
+}
+
+/* Steals v; on failure obj is released. */
+static int put(PyObject *obj, int type, int i, PyObject *v)
+{
+    if (v == NULL) {
+        return -1;
+    }
+    SLOT(obj, classes[type].off[i]) = v;
+    return 0;
+}
+
+#define PUT_U(i, x) put(obj, t, (i), PyLong_FromUnsignedLong((unsigned long)(x)))
+#define PUT_F(i, x) put(obj, t, (i), PyFloat_FromDouble((double)(x)))
+
+static PyObject *message_object(const hil_msg *m)
+{
+    int t = m->type;
+    PyObject *obj = new_message(t);
+    if (obj == NULL) {
+        return NULL;
+    }
+    int rc = 0;
+    switch (t) {
+    case HIL_MSG_SAMPLE: {
+        const hil_sample *s = &m->u.sample;
+        rc = PUT_U(0, s->period) | PUT_U(1, s->adc_i1) | PUT_U(2, s->adc_i2) | PUT_U(3, s->adc_vdc) |
+             PUT_U(4, s->encoder) | PUT_U(5, s->status);
+        break;
+    }
+    case HIL_MSG_GATES:
+        rc = PUT_U(0, m->u.gates.period) | PUT_U(1, m->u.gates.gates);
+        break;
+    case HIL_MSG_DUTY: {
+        const uint16_t *d = m->u.duty.duty;
+        rc = PUT_U(0, m->u.duty.period) |
+             put(obj, t, 1, Py_BuildValue("(HHH)", d[0], d[1], d[2]));
+        break;
+    }
+    case HIL_MSG_TELEMETRY: {
+        const hil_telemetry *s = &m->u.telemetry;
+        const float f[12] = {s->speed_feedback_rad_s, s->speed_encoder_rad_s, s->speed_raw_rad_s,
+                             s->speed_lpf_rad_s,      s->speed_ekf_rad_s,     s->flux_angle_rad,
+                             s->ekf_angle_rad,        s->flux_mag_wb,         s->torque_est_nm,
+                             s->torque_ref_nm,        s->rotor_pos_conv_rad,  s->rotor_pos_ekf_rad};
+        rc = PUT_U(0, s->period) | PUT_U(1, s->sector) | PUT_U(2, s->speed_source) | PUT_U(3, s->state) |
+             PUT_U(4, s->gates);
+        for (int i = 0; i < 12 && rc == 0; i++) {
+            rc = PUT_F(5 + i, f[i]);
+        }
+        break;
+    }
+    case HIL_MSG_HELLO: {
+        const hil_hello *s = &m->u.hello;
+        rc = PUT_U(0, s->proto_version) | PUT_U(1, s->role) | PUT_U(2, s->capabilities) |
+             PUT_U(3, s->control_period_ns) | PUT_U(4, s->name_len) |
+             put(obj, t, 5, PyBytes_FromStringAndSize(s->name, (Py_ssize_t)s->name_len));
+        break;
+    }
+    case HIL_MSG_COMMAND: {
+        const hil_command *s = &m->u.command;
+        rc = PUT_U(0, s->flags) | PUT_U(1, s->speed_source) | PUT_F(2, s->speed_ref_rad_s) |
+             PUT_F(3, s->torque_ref_nm) | PUT_F(4, s->flux_ref_wb);
+        break;
+    }
+    case HIL_MSG_PARAM_SET:
+        rc = PUT_U(0, m->u.param_set.id) | PUT_F(1, m->u.param_set.value);
+        break;
+    case HIL_MSG_PARAM_GET:
+        rc = PUT_U(0, m->u.param_get.id);
+        break;
+    case HIL_MSG_PARAM_VALUE:
+        rc = PUT_U(0, m->u.param_value.id) | PUT_U(1, m->u.param_value.status) | PUT_F(2, m->u.param_value.value);
+        break;
+    case HIL_MSG_STATUS:
+        rc = PUT_U(0, m->u.status.period) | PUT_U(1, m->u.status.state) | PUT_U(2, m->u.status.fault_code);
+        break;
+    case HIL_MSG_FAULT:
+        rc = PUT_U(0, m->u.fault.period) | PUT_U(1, m->u.fault.code) | PUT_F(2, m->u.fault.value);
+        break;
+    case HIL_MSG_HEARTBEAT:
+        rc = PUT_U(0, m->u.heartbeat.counter);
+        break;
+    default: /* SHUTDOWN: no fields */
+        break;
+    }
+    if (rc != 0) {
+        Py_DECREF(obj);
+        return NULL;
+    }
+    return obj;
+}
+
+/* ------------------------------------------------------------------ message object -> hil_msg */
+
+/* Each returns 0, or -1 when the value is not one the C encoder takes as is (no exception set):
+ * the caller then hands the message to the Python codec. */
+static int get_uint(PyObject *obj, Py_ssize_t off, unsigned long max, unsigned long *out)
+{
+    PyObject *v = SLOT(obj, off);
+    if (v == NULL || !PyLong_Check(v)) {
+        return -1;
+    }
+    int overflow;
+    long long x = PyLong_AsLongLongAndOverflow(v, &overflow);
+    if (overflow || x < 0 || (unsigned long long)x > max) {
+        return -1;
+    }
+    *out = (unsigned long)x;
+    return 0;
+}
+
+static int get_f32(PyObject *obj, Py_ssize_t off, float *out)
+{
+    PyObject *v = SLOT(obj, off);
+    double d;
+    if (v != NULL && PyFloat_Check(v)) {
+        d = PyFloat_AS_DOUBLE(v);
+    } else if (v != NULL && PyLong_Check(v)) {
+        d = PyLong_AsDouble(v);
+        if (d == -1.0 && PyErr_Occurred()) {
+            PyErr_Clear();
+            return -1;
+        }
+    } else {
+        return -1;
+    }
+    /* struct's '<f': the same rounding, the same NaN bits, the same refusal of a finite value
+     * too large for a float32. */
+    unsigned char b[4];
+    if (PyFloat_Pack4(d, (char *)b, 1) < 0) {
+        PyErr_Clear();
+        return -1;
+    }
+    uint32_t u = (uint32_t)b[0] | (uint32_t)b[1] << 8 | (uint32_t)b[2] << 16 | (uint32_t)b[3] << 24;
+    memcpy(out, &u, sizeof *out);
+    return 0;
+}
+
+#define U8 0xFFul
+#define U16 0xFFFFul
+#define U32 0xFFFFFFFFul
+#define GET_AS(ctype, i, max, dst)                                                                         \
+    do {                                                                                                   \
+        unsigned long v_;                                                                                  \
+        if (get_uint(obj, off[i], (max), &v_) < 0) {                                                       \
+            return -1;                                                                                     \
+        }                                                                                                  \
+        (dst) = (ctype)v_;                                                                                 \
+    } while (0)
+#define GET_U(i, max, dst) GET_AS(uint32_t, i, max, dst)
+#define GET_F(i, dst)                                                                                      \
+    do {                                                                                                   \
+        if (get_f32(obj, off[i], &(dst)) < 0) {                                                            \
+            return -1;                                                                                     \
+        }                                                                                                  \
+    } while (0)
+
+/* The hil_msg of obj (an instance of exactly one of the message classes), or -1. */
+static int message_struct(PyObject *obj, hil_msg *m)
+{
+    PyTypeObject *tp = Py_TYPE(obj);
+    int t;
+    if (tp == classes[HIL_MSG_SAMPLE].cls) { /* the hot ones first */
+        t = HIL_MSG_SAMPLE;
+    } else if (tp == classes[HIL_MSG_GATES].cls) {
+        t = HIL_MSG_GATES;
+    } else {
+        for (t = HIL_MSG_HELLO; t < NTYPES && classes[t].cls != tp; t++) {
+        }
+        if (t == NTYPES) {
+            return -1;
+        }
+    }
+    const Py_ssize_t *off = classes[t].off;
+    m->type = (uint8_t)t;
+    switch (t) {
+    case HIL_MSG_SAMPLE:
+        /* the 12-bit and 4-bit limits are the codec's own (hil_frame_encode answers HIL_ERR_RANGE) */
+        GET_U(0, U32, m->u.sample.period);
+        GET_AS(uint16_t, 1, U16, m->u.sample.adc_i1);
+        GET_AS(uint16_t, 2, U16, m->u.sample.adc_i2);
+        GET_AS(uint16_t, 3, U16, m->u.sample.adc_vdc);
+        GET_AS(uint16_t, 4, U16, m->u.sample.encoder);
+        GET_AS(uint8_t, 5, U8, m->u.sample.status);
+        break;
+    case HIL_MSG_GATES:
+        GET_U(0, U32, m->u.gates.period);
+        GET_AS(uint8_t, 1, U8, m->u.gates.gates);
+        break;
+    case HIL_MSG_DUTY: {
+        GET_U(0, U32, m->u.duty.period);
+        PyObject *d = SLOT(obj, off[1]);
+        if (d == NULL || !PyTuple_CheckExact(d) || PyTuple_GET_SIZE(d) != 3) {
+            return -1;
+        }
+        for (Py_ssize_t i = 0; i < 3; i++) {
+            PyObject *v = PyTuple_GET_ITEM(d, i);
+            int overflow;
+            long long x = PyLong_Check(v) ? PyLong_AsLongLongAndOverflow(v, &overflow) : -1;
+            if (!PyLong_Check(v) || overflow || x < 0 || x > 0xFFFF) {
+                return -1;
+            }
+            m->u.duty.duty[i] = (uint16_t)x;
+        }
+        break;
+    }
+    case HIL_MSG_TELEMETRY: {
+        hil_telemetry *s = &m->u.telemetry;
+        float *const f[12] = {&s->speed_feedback_rad_s, &s->speed_encoder_rad_s, &s->speed_raw_rad_s,
+                              &s->speed_lpf_rad_s,      &s->speed_ekf_rad_s,     &s->flux_angle_rad,
+                              &s->ekf_angle_rad,        &s->flux_mag_wb,         &s->torque_est_nm,
+                              &s->torque_ref_nm,        &s->rotor_pos_conv_rad,  &s->rotor_pos_ekf_rad};
+        GET_U(0, U32, s->period);
+        GET_AS(uint8_t, 1, U8, s->sector);
+        GET_AS(uint8_t, 2, U8, s->speed_source);
+        GET_AS(uint8_t, 3, U8, s->state);
+        GET_AS(uint8_t, 4, U8, s->gates);
+        for (int i = 0; i < 12; i++) {
+            GET_F(5 + i, *f[i]);
+        }
+        break;
+    }
+    case HIL_MSG_HELLO: {
+        hil_hello *s = &m->u.hello;
+        GET_AS(uint8_t, 0, U8, s->proto_version);
+        GET_AS(uint8_t, 1, U8, s->role);
+        GET_AS(uint16_t, 2, U16, s->capabilities);
+        GET_U(3, U32, s->control_period_ns);
+        GET_AS(uint8_t, 4, HIL_NAME_MAX, s->name_len);
+        PyObject *name = SLOT(obj, off[5]);
+        if (name == NULL || !PyBytes_CheckExact(name) || PyBytes_GET_SIZE(name) != (Py_ssize_t)s->name_len) {
+            return -1;
+        }
+        memcpy(s->name, PyBytes_AS_STRING(name), s->name_len);
+        break;
+    }
+    case HIL_MSG_COMMAND:
+        GET_AS(uint8_t, 0, U8, m->u.command.flags);
+        GET_AS(uint8_t, 1, U8, m->u.command.speed_source);
+        GET_F(2, m->u.command.speed_ref_rad_s);
+        GET_F(3, m->u.command.torque_ref_nm);
+        GET_F(4, m->u.command.flux_ref_wb);
+        break;
+    case HIL_MSG_PARAM_SET:
+        GET_AS(uint16_t, 0, U16, m->u.param_set.id);
+        GET_F(1, m->u.param_set.value);
+        break;
+    case HIL_MSG_PARAM_GET:
+        GET_AS(uint16_t, 0, U16, m->u.param_get.id);
+        break;
+    case HIL_MSG_PARAM_VALUE:
+        GET_AS(uint16_t, 0, U16, m->u.param_value.id);
+        GET_AS(uint8_t, 1, U8, m->u.param_value.status);
+        GET_F(2, m->u.param_value.value);
+        break;
+    case HIL_MSG_STATUS:
+        GET_U(0, U32, m->u.status.period);
+        GET_AS(uint8_t, 1, U8, m->u.status.state);
+        GET_AS(uint16_t, 2, U16, m->u.status.fault_code);
+        break;
+    case HIL_MSG_FAULT:
+        GET_U(0, U32, m->u.fault.period);
+        GET_AS(uint16_t, 1, U16, m->u.fault.code);
+        GET_F(2, m->u.fault.value);
+        break;
+    case HIL_MSG_HEARTBEAT:
+        GET_U(0, U32, m->u.heartbeat.counter);
+        break;
+    default: /* SHUTDOWN */
+        break;
+    }
+    return 0;
+}
+
+/* One frame of msg with sequence number seq; NULL with an exception (from the Python codec) when
+ * it cannot be encoded. */
+static PyObject *frame_bytes(PyObject *msg, unsigned seq)
+{
+    hil_msg m;
+    if (message_struct(msg, &m) == 0) {
+        uint8_t out[HIL_MAX_ENCODED_FRAME];
+        m.seq = (uint8_t)seq;
+        int n = hil_frame_encode(&m, out, sizeof out);
+        if (n > 0) {
+            return PyBytes_FromStringAndSize((const char *)out, n);
+        }
+    }
+    /* Not for the C encoder as is: the Python codec encodes it alike or raises the ProtocolError. */
+    return PyObject_CallFunction(fallback_encode, "OI", msg, seq);
+}
+
+/* seq & 0xFF for any int, as Python computes it. */
+static int seq_of(PyObject *v, unsigned *seq)
+{
+    if (PyLong_Check(v)) {
+        int overflow;
+        long long x = PyLong_AsLongLongAndOverflow(v, &overflow);
+        if (!overflow) {
+            *seq = (unsigned)(x & 0xFF);
+            return 0;
+        }
+    }
+    PyObject *mask = PyLong_FromLong(0xFF);
+    if (mask == NULL) {
+        return -1;
+    }
+    PyObject *r = PyNumber_And(v, mask);
+    Py_DECREF(mask);
+    if (r == NULL) {
+        return -1;
+    }
+    long x = PyLong_AsLong(r);
+    Py_DECREF(r);
+    if (x == -1 && PyErr_Occurred()) {
+        return -1;
+    }
+    *seq = (unsigned)x;
+    return 0;
+}
+
+PyDoc_STRVAR(encode_frame_doc, "encode_frame(msg, seq) -> bytes\n\n"
+                               "One serial frame: COBS(header | payload | crc16) followed by 0x00.");
+
+static PyObject *mod_encode_frame(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    (void)self;
+    unsigned seq;
+    if (nargs != 2) {
+        PyErr_SetString(PyExc_TypeError, "encode_frame(msg, seq) takes 2 arguments");
+        return NULL;
+    }
+    if (!ready() || seq_of(args[1], &seq) < 0) {
+        return NULL;
+    }
+    return frame_bytes(args[0], seq);
+}
+
+PyDoc_STRVAR(crc16_doc, "crc16(data) -> int\n\nCRC-16/CCITT-FALSE of a bytes-like object (hil_crc16).");
+
+static PyObject *mod_crc16(PyObject *self, PyObject *arg)
+{
+    (void)self;
+    Py_buffer view;
+    if (PyObject_GetBuffer(arg, &view, PyBUF_SIMPLE) < 0) {
+        return NULL;
+    }
+    uint16_t crc = hil_crc16((const uint8_t *)view.buf, (size_t)view.len);
+    PyBuffer_Release(&view);
+    return PyLong_FromLong(crc);
+}
+
+/* ------------------------------------------------------------------ FrameEncoder */
+
+typedef struct {
+    PyObject_HEAD
+    unsigned seq;
+} EncoderObject;
+
+static int Encoder_init(EncoderObject *self, PyObject *args, PyObject *kwds)
+{
+    static char *kwlist[] = {"first_seq", NULL};
+    PyObject *first = NULL;
+    if (!PyArg_ParseTupleAndKeywords(args, kwds, "|O:FrameEncoder", kwlist, &first)) {
+        return -1;
+    }
+    unsigned seq = 0;
+    if (first != NULL && seq_of(first, &seq) < 0) {
+        return -1;
+    }
+    self->seq = seq;
+    return 0;
+}
+
+static PyObject *Encoder_encode(EncoderObject *self, PyObject *msg)
+{
+    if (!ready()) {
+        return NULL;
+    }
+    PyObject *frame = frame_bytes(msg, self->seq);
+    if (frame != NULL) {
+        self->seq = (self->seq + 1u) & 0xFFu; /* a message that failed to encode does not use a number */
+    }
+    return frame;
+}
+
+static PyObject *Encoder_get_seq(EncoderObject *self, void *closure)
+{
+    (void)closure;
+    return PyLong_FromUnsignedLong(self->seq);
+}
+
+static int Encoder_set_seq(EncoderObject *self, PyObject *v, void *closure)
+{
+    (void)closure;
+    if (v == NULL) {
+        PyErr_SetString(PyExc_AttributeError, "seq cannot be deleted");
+        return -1;
+    }
+    unsigned seq;
+    if (seq_of(v, &seq) < 0) {
+        return -1;
+    }
+    self->seq = seq;
+    return 0;
+}
+
+static PyMethodDef Encoder_methods[] = {
+    {"encode", (PyCFunction)Encoder_encode, METH_O,
+     "encode(msg) -> bytes: the next frame, numbered with this encoder's u8 sequence counter"},
+    {NULL, NULL, 0, NULL},
+};
+
+static PyGetSetDef Encoder_getset[] = {
+    {"seq", (getter)Encoder_get_seq, (setter)Encoder_set_seq, "sequence number of the next frame (u8)", NULL},
+    {NULL, NULL, NULL, NULL, NULL},
+};
+
+static PyTypeObject EncoderType = {
+    PyVarObject_HEAD_INIT(NULL, 0)
+    .tp_name = "protocol.ccodec.FrameEncoder",
+    .tp_basicsize = sizeof(EncoderObject),
+    .tp_flags = Py_TPFLAGS_DEFAULT,
+    .tp_doc = PyDoc_STR("FrameEncoder(first_seq=0): encodes messages into serial frames with hil_frame_encode, "
+                        "numbering them with its own u8 sequence counter."),
+    .tp_new = PyType_GenericNew,
+    .tp_init = (initproc)Encoder_init,
+    .tp_methods = Encoder_methods,
+    .tp_getset = Encoder_getset,
+};
+
+/* ------------------------------------------------------------------ StreamDecoder */
+
+enum { C_FRAMES_OK, C_CRC, C_FRAMING, C_SEQ_GAPS, C_UNKNOWN, C_VERSION, C_LENGTH, NCOUNTERS };
+static const char *const counter_names[NCOUNTERS] = {"frames_ok", "crc_errors", "framing_errors", "seq_gaps",
+                                                     "unknown_types", "version_errors", "length_errors"};
+static PyObject *counter_keys[NCOUNTERS];
+
+typedef struct {
+    PyObject_HEAD
+    hil_decoder d;
+    unsigned long long total[NCOUNTERS];
+} DecoderObject;
+
+static uint32_t *decoder_counter(hil_decoder *d, int i)
+{
+    switch (i) {
+    case C_FRAMES_OK:
+        return &d->frames_ok;
+    case C_CRC:
+        return &d->crc_errors;
+    case C_FRAMING:
+        return &d->framing_errors;
+    case C_SEQ_GAPS:
+        return &d->seq_gaps;
+    case C_UNKNOWN:
+        return &d->unknown_types;
+    case C_VERSION:
+        return &d->version_errors;
+    default:
+        return &d->length_errors;
+    }
+}
+
+static void decoder_collect(DecoderObject *self)
+{
+    hil_decoder *d = &self->d;
+    self->total[C_FRAMES_OK] += d->frames_ok;
+    self->total[C_CRC] += d->crc_errors;
+    self->total[C_FRAMING] += d->framing_errors;
+    self->total[C_SEQ_GAPS] += d->seq_gaps;
+    self->total[C_UNKNOWN] += d->unknown_types;
+    self->total[C_VERSION] += d->version_errors;
+    self->total[C_LENGTH] += d->length_errors;
+    d->frames_ok = d->crc_errors = d->framing_errors = d->seq_gaps = 0;
+    d->unknown_types = d->version_errors = d->length_errors = 0;
+}
+
+static int Decoder_init(DecoderObject *self, PyObject *args, PyObject *kwds)
+{
+    if (PyTuple_GET_SIZE(args) != 0 || (kwds != NULL && PyDict_GET_SIZE(kwds) != 0)) {
+        PyErr_SetString(PyExc_TypeError, "StreamDecoder() takes no arguments");
+        return -1;
+    }
+    hil_decoder_init(&self->d);
+    memset(self->total, 0, sizeof self->total);
+    return 0;
+}
+
+/* Decodes data[0:len] into list out (appends). -1 with an exception on failure (memory only). */
+static int decode_into(DecoderObject *self, const uint8_t *p, size_t len, PyObject *out)
+{
+    int rc = 0;
+    while (len > 0u) {
+        hil_msg m;
+        int got;
+        size_t used = hil_decoder_feed_buf(&self->d, p, len, &m, &got);
+        p += used;
+        len -= used;
+        if (got) {
+            PyObject *obj = message_object(&m);
+            if (obj == NULL || PyList_Append(out, obj) < 0) {
+                Py_XDECREF(obj);
+                rc = -1; /* keep decoding: the counters stay those of the whole input */
+                continue;
+            }
+            Py_DECREF(obj);
+        }
+    }
+    decoder_collect(self);
+    return rc;
+}
+
+static PyObject *Decoder_feed(DecoderObject *self, PyObject *data)
+{
+    if (!ready()) {
+        return NULL;
+    }
+    PyObject *out = PyList_New(0);
+    if (out == NULL) {
+        return NULL;
+    }
+    int rc;
+    if (PyBytes_CheckExact(data)) {
+        rc = decode_into(self, (const uint8_t *)PyBytes_AS_STRING(data), (size_t)PyBytes_GET_SIZE(data), out);
+    } else {
+        Py_buffer view;
+        if (PyObject_GetBuffer(data, &view, PyBUF_SIMPLE) < 0) {
+            Py_DECREF(out);
+            return NULL;
+        }
+        rc = decode_into(self, (const uint8_t *)view.buf, (size_t)view.len, out);
+        PyBuffer_Release(&view);
+    }
+    if (rc < 0) {
+        Py_DECREF(out);
+        return NULL;
+    }
+    return out;
+}
+
+static PyObject *Decoder_reset(DecoderObject *self, PyObject *unused)
+{
+    (void)unused;
+    /* forgets the partial frame and the sequence history; counters, last_seq and
+     * last_bad_version are kept, as in protocol/codec.py */
+    uint8_t last_seq = self->d.last_seq, last_bad = self->d.last_bad_version;
+    hil_decoder_init(&self->d);
+    self->d.last_seq = last_seq;
+    self->d.last_bad_version = last_bad;
+    Py_RETURN_NONE;
+}
+
+static PyObject *Decoder_get_counter(DecoderObject *self, void *closure)
+{
+    return PyLong_FromUnsignedLongLong(self->total[(intptr_t)closure]);
+}
+
+static int Decoder_set_counter(DecoderObject *self, PyObject *v, void *closure)
+{
+    if (v == NULL) {
+        PyErr_SetString(PyExc_AttributeError, "counters cannot be deleted");
+        return -1;
+    }
+    unsigned long long x = PyLong_AsUnsignedLongLong(v);
+    if (x == (unsigned long long)-1 && PyErr_Occurred()) {
+        return -1;
+    }
+    self->total[(intptr_t)closure] = x;
+    *decoder_counter(&self->d, (int)(intptr_t)closure) = 0;
+    return 0;
+}
+
+static PyObject *Decoder_get_u8(DecoderObject *self, void *closure)
+{
+    return PyLong_FromLong(closure ? self->d.last_bad_version : self->d.last_seq);
+}
+
+static int Decoder_set_u8(DecoderObject *self, PyObject *v, void *closure)
+{
+    if (v == NULL) {
+        PyErr_SetString(PyExc_AttributeError, "cannot be deleted");
+        return -1;
+    }
+    long x = PyLong_AsLong(v);
+    if (x == -1 && PyErr_Occurred()) {
+        return -1;
+    }
+    if (x < 0 || x > 0xFF) {
+        PyErr_Format(PyExc_ValueError, "%s must be 0..255, got %ld", closure ? "last_bad_version" : "last_seq", x);
+        return -1;
+    }
+    if (closure) {
+        self->d.last_bad_version = (uint8_t)x;
+    } else {
+        self->d.last_seq = (uint8_t)x;
+    }
+    return 0;
+}
+
+static PyObject *Decoder_get_counters(DecoderObject *self, void *closure)
+{
+    (void)closure;
+    PyObject *dict = PyDict_New();
+    if (dict == NULL) {
+        return NULL;
+    }
+    for (int i = 0; i < NCOUNTERS; i++) {
+        PyObject *v = PyLong_FromUnsignedLongLong(self->total[i]);
+        if (v == NULL || PyDict_SetItem(dict, counter_keys[i], v) < 0) {
+            Py_XDECREF(v);
+            Py_DECREF(dict);
+            return NULL;
+        }
+        Py_DECREF(v);
+    }
+    return dict;
+}
+
+static PyObject *Decoder_get_buffered(DecoderObject *self, void *closure)
+{
+    (void)closure;
+    /* encoded bytes held waiting for a delimiter; none while discarding an overlong frame */
+    return PyLong_FromSize_t(self->d.overflow ? 0u : self->d.encoded_len);
+}
+
+static PyMethodDef Decoder_methods[] = {
+    {"feed", (PyCFunction)Decoder_feed, METH_O,
+     "feed(data) -> list: messages completed by the bytes-like data, in order; bad frames are counted, "
+     "never raised"},
+    {"reset", (PyCFunction)Decoder_reset, METH_NOARGS,
+     "reset(): forgets a partial frame and the sequence history (counters are kept)"},
+    {NULL, NULL, 0, NULL},
+};
+
+static PyGetSetDef Decoder_getset[] = {
+    {"frames_ok", (getter)Decoder_get_counter, (setter)Decoder_set_counter, NULL, (void *)(intptr_t)C_FRAMES_OK},
+    {"crc_errors", (getter)Decoder_get_counter, (setter)Decoder_set_counter, NULL, (void *)(intptr_t)C_CRC},
+    {"framing_errors", (getter)Decoder_get_counter, (setter)Decoder_set_counter, NULL, (void *)(intptr_t)C_FRAMING},
+    {"seq_gaps", (getter)Decoder_get_counter, (setter)Decoder_set_counter, NULL, (void *)(intptr_t)C_SEQ_GAPS},
+    {"unknown_types", (getter)Decoder_get_counter, (setter)Decoder_set_counter, NULL, (void *)(intptr_t)C_UNKNOWN},
+    {"version_errors", (getter)Decoder_get_counter, (setter)Decoder_set_counter, NULL, (void *)(intptr_t)C_VERSION},
+    {"length_errors", (getter)Decoder_get_counter, (setter)Decoder_set_counter, NULL, (void *)(intptr_t)C_LENGTH},
+    {"last_seq", (getter)Decoder_get_u8, (setter)Decoder_set_u8, "sequence number of the last frame accepted",
+     NULL},
+    {"last_bad_version", (getter)Decoder_get_u8, (setter)Decoder_set_u8,
+     "header version of the last frame rejected for its version", (void *)1},
+    {"counters", (getter)Decoder_get_counters, NULL, "the seven counters as a dict (COUNTER_NAMES order)", NULL},
+    {"buffered", (getter)Decoder_get_buffered, NULL, "bytes held waiting for a delimiter (at most 71)", NULL},
+    {NULL, NULL, NULL, NULL, NULL},
+};
+
+static PyTypeObject DecoderType = {
+    PyVarObject_HEAD_INIT(NULL, 0)
+    .tp_name = "protocol.ccodec.StreamDecoder",
+    .tp_basicsize = sizeof(DecoderObject),
+    .tp_flags = Py_TPFLAGS_DEFAULT,
+    .tp_doc = PyDoc_STR("StreamDecoder(): turns a byte stream into messages with the firmware's hil_decoder; "
+                        "never raises on bad input. Same counters and rules as protocol.codec.StreamDecoder."),
+    .tp_new = PyType_GenericNew,
+    .tp_init = (initproc)Decoder_init,
+    .tp_methods = Decoder_methods,
+    .tp_getset = Decoder_getset,
+};
+
+/* ------------------------------------------------------------------ module */
+
+static PyMethodDef module_methods[] = {
+    {"setup", mod_setup, METH_VARARGS, setup_doc},
+    {"encode_frame", (PyCFunction)(void (*)(void))mod_encode_frame, METH_FASTCALL, encode_frame_doc},
+    {"crc16", mod_crc16, METH_O, crc16_doc},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef module_def = {
+    PyModuleDef_HEAD_INIT,
+    .m_name = "_hilcodec",
+    .m_doc = "The firmware's C codec (protocol/c/hil_proto.c) for the bench; use it through protocol.ccodec.",
+    .m_size = -1,
+    .m_methods = module_methods,
+};
+
+PyMODINIT_FUNC PyInit__hilcodec(void);
+
+PyMODINIT_FUNC PyInit__hilcodec(void)
+{
+    if (PyType_Ready(&EncoderType) < 0 || PyType_Ready(&DecoderType) < 0) {
+        return NULL;
+    }
+    for (int i = 0; i < NCOUNTERS; i++) {
+        if (counter_keys[i] == NULL && (counter_keys[i] = PyUnicode_InternFromString(counter_names[i])) == NULL) {
+            return NULL;
+        }
+    }
+    PyObject *m = PyModule_Create(&module_def);
+    if (m == NULL) {
+        return NULL;
+    }
+    Py_INCREF(&EncoderType);
+    Py_INCREF(&DecoderType);
+    if (PyModule_AddObject(m, "FrameEncoder", (PyObject *)&EncoderType) < 0 ||
+        PyModule_AddObject(m, "StreamDecoder", (PyObject *)&DecoderType) < 0 ||
+        PyModule_AddIntConstant(m, "MAX_ENCODED_SEGMENT", (long)HIL_MAX_ENCODED_SEGMENT) < 0 ||
+        PyModule_AddIntConstant(m, "MAX_ENCODED_FRAME", (long)HIL_MAX_ENCODED_FRAME) < 0 ||
+        PyModule_AddIntConstant(m, "PROTOCOL_VERSION", (long)HIL_PROTO_VERSION) < 0) {
+        Py_DECREF(m);
+        return NULL;
+    }
+    return m;
+}
