@@ -24,7 +24,7 @@ from protocol.messages import (
     Command, Duty, Fault, Gates, Heartbeat, Hello, ParamGet, ParamSet, ParamValue, Sample, Shutdown,
     Status, Telemetry,
 )
-from protocol.vector_file import load
+from protocol import vector_file
 
 try:  # tests/ as a package, or as a plain directory on sys.path
     from tests import test_protocol_fuzz as fuzz
@@ -33,9 +33,16 @@ except ImportError:
 
 MESSAGES, SETTINGS = fuzz.MESSAGES, fuzz.SETTINGS
 C_DIR = Path(__file__).resolve().parent.parent / "protocol" / "c"
-VECTORS = load()
-VECTOR_MESSAGES = list(VECTORS.messages.values())
-SERIAL = VECTORS.serial_streams
+# Every vector file in protocol/vectors/ (generated cases and the set built by hand from SPEC.md).
+_PATHS = (vector_file.vector_paths() if hasattr(vector_file, "vector_paths") else [vector_file.VECTORS_PATH])
+FILES = {path.stem: vector_file.load(path) for path in _PATHS}
+VECTOR_MESSAGES = [(f, v) for f, vs in FILES.items() for v in vs.messages.values()]
+REJECTS = [(f, r) for f, vs in FILES.items() for r in vs.rejects]
+SERIAL = [(f, s) for f, vs in FILES.items() for s in vs.serial_streams]
+
+
+def _ids(items):
+    return [f"{f}:{x.name}" for f, x in items]
 EXTRA = ("last_seq", "last_bad_version", "buffered")
 _lock = threading.Lock()
 
@@ -122,8 +129,12 @@ def test_stream_by_hand(cc):
 
 # ---------------------------------------------------------------- the shared vectors
 
-@pytest.mark.parametrize("v", VECTOR_MESSAGES, ids=[v.name for v in VECTOR_MESSAGES])
-def test_vector_message(cc, v):
+def test_vector_files_were_found():
+    assert VECTOR_MESSAGES and SERIAL and REJECTS, _PATHS
+
+
+@pytest.mark.parametrize("f, v", VECTOR_MESSAGES, ids=_ids(VECTOR_MESSAGES))
+def test_vector_message(cc, f, v):
     assert cc.encode_frame(v.msg, v.seq) == v.serial
     enc = cc.FrameEncoder(v.seq)
     assert enc.encode(v.msg) == v.serial
@@ -137,8 +148,8 @@ def test_vector_message(cc, v):
     assert dec.counters == dict.fromkeys(py.COUNTER_NAMES, 0) | {"frames_ok": 1}
 
 
-@pytest.mark.parametrize("r", VECTORS.rejects, ids=[r.name for r in VECTORS.rejects])
-def test_vector_reject(cc, r):
+@pytest.mark.parametrize("f, r", REJECTS, ids=_ids(REJECTS))
+def test_vector_reject(cc, f, r):
     with pytest.raises(py.ProtocolError):
         cc.encode_frame(r.msg, 0)
     enc = cc.FrameEncoder(5)
@@ -147,33 +158,33 @@ def test_vector_reject(cc, r):
     assert enc.seq == 5  # a message that failed to encode does not use a number
 
 
-def _check_serial(cc, stream, chunks):
+def _check_serial(cc, f, stream, chunks):
     dec = cc.StreamDecoder()
     got = []
     for chunk in chunks:
         got += dec.feed(chunk)
         assert dec.buffered <= py.MAX_ENCODED_SEGMENT
-    assert got == [VECTORS.messages[n].msg for n in stream.yields]
+    assert got == [FILES[f].messages[n].msg for n in stream.yields]
     want = dict.fromkeys(py.COUNTER_NAMES + ("last_bad_version",), 0) | stream.counters
     assert dec.counters | {"last_bad_version": dec.last_bad_version} == want
 
 
-@pytest.mark.parametrize("s", SERIAL, ids=[s.name for s in SERIAL])
-def test_vector_stream_whole(cc, s):
-    _check_serial(cc, s, [s.data])
+@pytest.mark.parametrize("f, s", SERIAL, ids=_ids(SERIAL))
+def test_vector_stream_whole(cc, f, s):
+    _check_serial(cc, f, s, [s.data])
 
 
-@pytest.mark.parametrize("s", SERIAL, ids=[s.name for s in SERIAL])
-def test_vector_stream_byte_by_byte(cc, s):
-    _check_serial(cc, s, [s.data[i:i + 1] for i in range(len(s.data))])
+@pytest.mark.parametrize("f, s", SERIAL, ids=_ids(SERIAL))
+def test_vector_stream_byte_by_byte(cc, f, s):
+    _check_serial(cc, f, s, [s.data[i:i + 1] for i in range(len(s.data))])
 
 
-@pytest.mark.parametrize("s", SERIAL, ids=[s.name for s in SERIAL])
-def test_vector_stream_random_chunks(cc, s):
+@pytest.mark.parametrize("f, s", SERIAL, ids=_ids(SERIAL))
+def test_vector_stream_random_chunks(cc, f, s):
     rng = random.Random(s.name)
     cuts = sorted(rng.sample(range(1, len(s.data)), min(len(s.data) - 1, 12)))
     bounds = [0, *cuts, len(s.data)]
-    _check_serial(cc, s, [bytearray(s.data[a:b]) for a, b in zip(bounds, bounds[1:])])
+    _check_serial(cc, f, s, [bytearray(s.data[a:b]) for a, b in zip(bounds, bounds[1:])])
 
 
 # ---------------------------------------------------------------- the Python decoder's fuzzers, in C
