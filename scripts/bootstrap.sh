@@ -30,12 +30,20 @@ declare -A NEEDED=(
   [chromium]="/usr/bin/chromium"
   # python3 -m venv needs ensurepip's wheels
   [python3-venv]="PYTHON:ensurepip,venv"
+  # Python.h: the C codec's extension module (protocol/c/python) is compiled against it
+  [python3-dev]="PYINCLUDE:Python.h"
 )
 
 present() {  # present PKG -> 0 when every file of PKG is there
   local spec f
   IFS=';' read -ra specs <<<"${NEEDED[$1]}"
   for spec in "${specs[@]}"; do
+    if [[ $spec == PYINCLUDE:* ]]; then
+      local inc
+      inc=$(python3 -c 'import sysconfig; print(sysconfig.get_paths()["include"])')
+      [ -e "$inc/${spec#PYINCLUDE:}" ] || { MISSING_FILE="$inc/${spec#PYINCLUDE:}"; return 1; }
+      continue
+    fi
     if [[ $spec == PYTHON:* ]]; then
       python3 -c "import ${spec#PYTHON:}" >/dev/null 2>&1 || { MISSING_FILE="python3 modules ${spec#PYTHON:}"; return 1; }
       continue
