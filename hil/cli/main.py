@@ -72,6 +72,21 @@ def _parser() -> argparse.ArgumentParser:
 
     plans = sub.add_parser("plans", help="list and validate plans")
     plans.add_argument("paths", nargs="*", type=Path, default=[Path("test_plans")])
+
+    sweep = sub.add_parser("sweep", help="run plans many times over a parameter space",
+                           description="Run a sweep file (test_plans/sweeps/): its plans over its "
+                                       "parameter space, on local processes or a Dask cluster; "
+                                       "writes results.parquet/.json, summary.json, index.html and "
+                                       "junit.xml into --out (docs/scale.md).")
+    sweep.add_argument("sweep", type=Path, help="sweep file")
+    where = sweep.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=int, default=1, metavar="N",
+                       help="local worker processes (default 1)")
+    where.add_argument("--cluster", metavar="ADDRESS", help="Dask scheduler, e.g. tcp://HOST:8786")
+    sweep.add_argument("--out", type=Path, help="output directory (default out/sweeps/NAME)")
+    sweep.add_argument("--resume", action="store_true",
+                       help="continue an interrupted sweep in --out without repeating finished runs")
+    sweep.add_argument("--no-progress", action="store_true", help="no progress bar")
     return parser
 
 
@@ -97,6 +112,10 @@ def main(argv: list[str] | None = None) -> int:
             return subprocess.call(argv)
         if args.command == "plans":
             return _plans_command(args)
+        if args.command == "sweep":
+            from hil.sweep.run import sweep_command
+
+            return sweep_command(args)
     except KeyboardInterrupt:
         print("hil: interrupted", file=sys.stderr)
         return EXIT_ERROR

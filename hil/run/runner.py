@@ -165,6 +165,7 @@ class RunOptions:
     progress: Any = None            # callable(done_s, total_s) or None
     modbus: tuple[str, int] | None = None
     log: bool = True
+    reports: bool = True            # False: only the MCAP log goes into out_dir (hil sweep)
 
 
 @dataclass
@@ -176,11 +177,12 @@ class _RunState:
 
 def run_plan(plan: Plan, link: str | None = None, mode: str | None = None,
              out_dir: Path | None = None, seed: int = 0, progress=None,
-             modbus: tuple[str, int] | None = None) -> tuple[PlanResult, SignalSet]:
-    """Runs one plan; writes log and reports into out_dir when given. Never raises for a
-    failing board or plan: the outcome says what happened."""
+             modbus: tuple[str, int] | None = None,
+             reports: bool = True) -> tuple[PlanResult, SignalSet]:
+    """Runs one plan; writes log and (unless reports=False) reports into out_dir when given.
+    Never raises for a failing board or plan: the outcome says what happened."""
     opts = RunOptions(link=link, mode=mode, out_dir=out_dir, seed=seed, progress=progress,
-                      modbus=modbus)
+                      modbus=modbus, reports=reports)
     return _run(plan, opts)
 
 
@@ -274,7 +276,7 @@ def _run(plan: Plan, opts: RunOptions) -> tuple[PlanResult, SignalSet]:
         sim_duration_s=sim_end, wall_duration_s=time.monotonic() - wall0, link=link, mode=mode,
         log_path=str(log_path) if log_path is not None else None, description=plan.description,
         marks=dict(state.marks), extra=extra)
-    if plan_dir is not None:
+    if plan_dir is not None and opts.reports:
         write_reports(result, signals, plan_dir, plan=plan)
     return result, signals
 
