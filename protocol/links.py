@@ -87,6 +87,7 @@ class SerialLink(Link):
         self._inbox: deque = deque()
         self._write_timeout_s = write_timeout_s
         self.tx_frames = self.tx_bytes = self.rx_bytes = 0
+        self._open_frame = False
         is_url = "://" in port
         if not is_url:
             serial_kwargs.setdefault("exclusive", True)
@@ -107,10 +108,9 @@ class SerialLink(Link):
     # -- sending
     def send(self, msg) -> None:
         data = self._encoder.encode(msg)
-        if not self.tx_frames:
+        if not self.tx_bytes:
             data = b"\x00" + data  # closes off whatever the far end had buffered (SPEC.md 3.2)
         self.send_bytes(data)
-        self.tx_frames += 1
 
     def send_bytes(self, data: bytes) -> None:
         """Writes raw bytes (fault injection: damaged or partial frames)."""
@@ -125,6 +125,15 @@ class SerialLink(Link):
         except Exception as exc:  # noqa: BLE001 - pyserial raises SerialException, OSError, ...
             raise LinkError(f"serial port '{self.url}': write failed: {exc}") from exc
         self.tx_bytes += len(data)
+        # tx_frames counts the non-empty frames written, whoever framed them (send, or a link
+        # tap handing whole frames to send_bytes): one per 0x00 that closes a non-empty run.
+        if 0 in data:
+            parts = data.split(b"\x00")
+            frames = sum(1 for p in parts[1:-1] if p) + (1 if parts[0] or self._open_frame else 0)
+            self.tx_frames += frames
+            self._open_frame = bool(parts[-1])
+        elif data:
+            self._open_frame = True
 
     def _write_fd(self, data: bytes) -> None:
         view = memoryview(data)
@@ -377,6 +386,7 @@ class PairLink(Link):
         if self._framing != "serial":
             raise LinkError(f"{self.url}: send_bytes needs the serial framing")
         self._tx.put([bytes(data)])
+        self.tx_frames += data.count(0)
 
     def recv(self, timeout_s: float | None = 0.0):
         if self._inbox:
@@ -436,7 +446,9 @@ def _option_value(text: str):
 
 
 def open_link(spec: str, role: int = Role.BENCH, **kwargs) -> Link:
-    """Opens a link from its string.
+    """Opens a serial or CAN link from its string: the ``serial:`` and ``can:`` back ends of the
+    bench's one link registry (``hil.links.registry.connect``, which also knows exec:, lib:,
+    qemu:, the stub's names and third-party link types). Use ``connect`` to name a board.
 
     serial:PORT[?baud=N]   PORT is a device path or any pyserial URL (loop://, socket://host:port);
                            a bare path or URL without the serial: prefix works too. Other query

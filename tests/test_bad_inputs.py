@@ -162,11 +162,12 @@ steps:
 """)
     code, out = _run(tmp_path, plan=plan)
     assert code == 2
-    record = _errored(out, capsys, "watchdog at period 419", "no GATES for 20 consecutive periods",
+    record = _errored(out, capsys, "watchdog: no GATES/DUTY for 20 consecutive periods (periods 400..419",
+                     "at period 419",
                       plan="unplug")
     assert record["extra"]["faults_injected"][0]["name"] == "link_unplug"
-    # 20 SAMPLEs, then the SHUTDOWN of the teardown: the cable is still out
-    assert record["extra"]["link_counters"]["out_unplugged"] == 21
+    # 20 periods of 4 SAMPLEs (SPEC 2.8.1 resends), then the SHUTDOWN of the teardown: the cable is still out
+    assert record["extra"]["link_counters"]["out_unplugged"] == 20 * 4 + 1
 
 
 # --------------------------------------------------------------------------- output

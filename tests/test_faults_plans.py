@@ -33,7 +33,8 @@ def test_fault_plans_pass(tmp_path, capsys):
     drop = results["fault-sensorless-frame-drop-burst"]
     counters = drop["extra"]["link_counters"]
     assert counters["out_dropped"] > 0 and counters["in_dropped"] > 0
-    assert counters["missed_answers"] >= counters["out_dropped"]
+    # SPEC 2.8.1: a lost SAMPLE (or its GATES) is resent; only 4 losses in a row miss a period
+    assert counters["resent_samples"] + counters["missed_answers"] >= counters["out_dropped"]
     assert [f["action"] for f in drop["extra"]["faults_injected"]] == ["inject", "lift"]
 
     loss = results["fault-encoder-loss-detected"]

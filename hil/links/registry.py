@@ -1,52 +1,90 @@
-"""One string names the board the bench talks to (python-can's ``interface=`` idea).
+"""One string names the board the bench talks to (python-can's ``interface=`` idea, pyserial's
+``serial_for_url``): ``connect(spec)`` is the one registry of link types.
 
-========================  ==================================================
-``stub``                   the stub firmware in-process (shared library); CI default
-``stub-pty``               ``hil-stub`` process on a pseudo-terminal, through pyserial
-``stub-can``               ``hil-stub`` process speaking SLCAN on a pseudo-terminal,
-                           through python-can's own ``slcan`` interface
-``qemu``                   the Cortex-M4F firmware in QEMU (mps2-an386), UART on TCP
-``serial:PORT[?baud=N]``   a real board on any pyserial port or URL
-``can:IFACE:CH[?...]``     a real board through any python-can interface
-========================  ==================================================
+=======================================  ==========================================================
+``exec:PATH[?args=...&transport=T]``      any executable speaking the protocol on stdin/stdout,
+                                           run on a pseudo-terminal; T = serial (default) or slcan
+``lib:PATH.so[?transport=serial|can]``    a firmware built as a shared library with the firmware
+                                           ABI of protocol/c/hil_fw_abi.h, in-process
+``qemu:IMAGE.elf[?machine=M&cpu=C]``      any Cortex-M image following docs/porting.md in QEMU
+                                           (default mps2-an386, cortex-m4; -icount shift=7)
+``serial:PORT[?baud=N]``                  a real board on any pyserial port or URL
+``can:IFACE:CH[?bitrate=N&...]``          a real board through any python-can interface
+``stub``                                  ``lib:`` on the stub's firmware_stub/build/libhilstub.so
+``stub-pty``                              ``exec:`` on the stub's ``hil-stub --stdio``
+``stub-can``                              ``exec:`` on ``hil-stub --slcan-stdio``, transport slcan
+``qemu``                                  ``qemu:`` on the stub's Cortex-M4F image
+=======================================  ==========================================================
 
-A BoardConnection owns the link and whatever process plays the board, and
-``close`` stops both, whatever happened before.
+Third-party link types are found through the entry-point group ``hil.links``: an entry point
+named ``NAME`` makes ``NAME:REST`` a link string. It loads to a callable ``factory(rest, spec)``
+that returns a ``BoardConnection`` or a ``protocol.links.Link`` (wrapped in one). Built-in names
+win over an entry point of the same name.
+
+A BoardConnection owns the link and whatever process plays the board; ``close`` stops both,
+whatever happened before, and ``report()`` says how the board process ended (exit status and
+its last stderr lines) for every error message.
 """
 from __future__ import annotations
 
 import os
+import shlex
 import subprocess
 import termios
+import threading
 import tty
+from collections import deque
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Callable
+from urllib.parse import parse_qsl
 
-from protocol.links import LinkError, open_link
+from protocol.links import Link, LinkError, open_link
 from protocol.messages import Role
 
-from hil.links.stub_library import EXECUTABLE_PATH, StubLibraryLink, ensure_built
+from hil.links.stub_library import EXECUTABLE_PATH, LIBRARY_PATH, ensure_built
 
-LINK_CHOICES = ("stub", "stub-pty", "stub-can", "qemu", "serial:PORT[?baud=N]",
+ENTRY_POINT_GROUP = "hil.links"
+
+LINK_CHOICES = ("stub", "stub-pty", "stub-can", "qemu", "exec:PATH[?args=...&transport=serial|slcan]",
+                "lib:PATH.so", "qemu:IMAGE.elf[?machine=mps2-an386]", "serial:PORT[?baud=N]",
                 "can:INTERFACE:CHANNEL[?bitrate=N]")
+
+STDERR_LINES = 10
 
 
 @dataclass
 class BoardConnection:
     spec: str
     link: Any
-    # Seconds to wait for the board's HELLO: a spawned process or an emulator needs longer.
-    hello_timeout_s: float = 2.0
-    # Wall-clock wait for a GATES answer before a period counts as missed.
-    answer_timeout_s: float = 0.25
+    # Waits a link that starts the board itself may raise (SPEC 2.8); None: the session policy's.
+    hello_wait_s: float | None = None
+    answer_wait_min_s: float | None = None
+    process: Any = None                       # subprocess.Popen of the board, if any
     _cleanups: list[Callable[[], None]] = field(default_factory=list)
-    process: subprocess.Popen | None = None
+    _output: Callable[[], list[str]] | None = None   # the board process's last output lines
 
     def board_alive(self) -> bool:
         return self.process is None or self.process.poll() is None
 
     def board_exit_status(self) -> int | None:
         return None if self.process is None else self.process.poll()
+
+    def output_tail(self) -> list[str]:
+        return list(self._output()) if self._output is not None else []
+
+    def report(self) -> str:
+        """'' while the board runs (or has no process); else its exit status and last stderr lines."""
+        if self.process is None:
+            return ""
+        status = self.process.poll()
+        if status is None:
+            return ""
+        text = f"the board process exited with status {status}"
+        tail = [line.rstrip() for line in self.output_tail() if line.strip()]
+        if tail:
+            text += "; its last stderr lines:\n    " + "\n    ".join(tail[-STDERR_LINES:])
+        return text
 
     def close(self) -> None:
         errors = []
@@ -84,53 +122,215 @@ def _pty_pair() -> tuple[int, int, str]:
     return master, slave, os.ttyname(slave)
 
 
-def _spawn_stub(args: list[str], master_fd: int) -> subprocess.Popen:
-    ensure_built()
-    return subprocess.Popen([str(EXECUTABLE_PATH), *args], stdin=master_fd, stdout=master_fd,
-                            stderr=subprocess.PIPE, close_fds=True, start_new_session=True)
+class _StderrTail:
+    """The last lines a board process wrote on stderr, read by a daemon thread."""
+
+    def __init__(self, stream, keep: int = 50) -> None:
+        self.lines: deque[str] = deque(maxlen=keep)
+        self._lock = threading.Lock()
+        self._thread = threading.Thread(target=self._read, args=(stream,), daemon=True)
+        self._thread.start()
+
+    def _read(self, stream) -> None:
+        try:
+            for raw in iter(stream.readline, b""):
+                with self._lock:
+                    self.lines.append(raw.decode("utf-8", "replace"))
+        except (OSError, ValueError):
+            pass
+
+    def __call__(self) -> list[str]:
+        self._thread.join(0.2)          # the process has exited: let its last lines arrive
+        with self._lock:
+            return list(self.lines)
+
+
+def _query(spec: str, rest: str, allowed: tuple[str, ...]) -> tuple[str, dict[str, str]]:
+    target, _, query = rest.partition("?")
+    options = dict(parse_qsl(query, keep_blank_values=True))
+    unknown = sorted(set(options) - set(allowed))
+    if unknown:
+        raise LinkError(f"link '{spec}': unknown option(s) {', '.join(unknown)}; "
+                        f"expected {', '.join(allowed) or 'none'}")
+    if not target:
+        raise LinkError(f"link '{spec}': no path given")
+    return target, options
+
+
+# ------------------------------------------------------------------ built-in link types
+
+def _exec_link(rest: str, spec: str) -> BoardConnection:
+    target, options = _query(spec, rest, ("args", "transport"))
+    transport = options.get("transport", "serial")
+    if transport not in ("serial", "slcan"):
+        raise LinkError(f"link '{spec}': transport '{transport}'; expected serial or slcan")
+    path = Path(target)
+    if not path.is_file():
+        raise LinkError(f"link '{spec}': executable '{path}' does not exist")
+    if not os.access(path, os.X_OK):
+        raise LinkError(f"link '{spec}': '{path}' is not executable (chmod +x?)")
+    try:
+        args = shlex.split(options.get("args", ""))
+    except ValueError as exc:
+        raise LinkError(f"link '{spec}': args: {exc}") from None
+    return spawn_on_pty(spec, [str(path.resolve()), *args], transport)
+
+
+def spawn_on_pty(spec: str, argv: list[str], transport: str = "serial") -> BoardConnection:
+    """Starts ``argv`` with stdin/stdout on a pseudo-terminal's master; the bench opens the slave."""
+    master, slave, slave_path = _pty_pair()
+    try:
+        proc = subprocess.Popen(argv, stdin=master, stdout=master, stderr=subprocess.PIPE,
+                                close_fds=True, start_new_session=True)
+    except OSError as exc:
+        os.close(master)
+        os.close(slave)
+        raise LinkError(f"link '{spec}': cannot start {argv[0]}: {exc}") from exc
+    os.close(master)  # the child holds it now
+    tail = _StderrTail(proc.stderr)
+    try:
+        if transport == "serial":
+            link = open_link(f"serial:{slave_path}?baud=2000000")
+        else:
+            link = open_link(f"can:slcan:{slave_path}?bitrate=1000000", role=Role.BENCH,
+                             sleep_after_open=0)
+    except Exception:
+        _stop_process(proc)
+        raise
+    finally:
+        os.close(slave)
+    conn = BoardConnection(spec, link, process=proc, _output=tail)
+    conn._cleanups.append(lambda: _stop_process(proc))
+    return conn
+
+
+def _lib_link(rest: str, spec: str) -> BoardConnection:
+    from hil.links.firmware_library import FirmwareLibraryLink
+
+    target, options = _query(spec, rest, ("transport",))
+    link = FirmwareLibraryLink(target, transport=options.get("transport", "serial"), url=spec)
+    # In-process: the firmware answers within the call, so every wait is 0 (SPEC 2.8).
+    return BoardConnection(spec, link, hello_wait_s=0.0, answer_wait_min_s=0.0)
+
+
+def _stub_link(spec: str) -> BoardConnection:
+    from hil.links.stub_library import StubLibraryLink
+
+    return BoardConnection(spec, StubLibraryLink(), hello_wait_s=0.0, answer_wait_min_s=0.0)
+
+
+def _qemu_link(rest: str, spec: str, build: bool = False) -> BoardConnection:
+    from hil.links.qemu import QemuBoard, QemuBoardError
+
+    if rest:
+        target, options = _query(spec, rest, ("machine", "cpu"))
+        elf = Path(target)
+        if not elf.is_file():
+            raise LinkError(f"link '{spec}': image '{elf}' does not exist")
+    else:
+        elf, options = None, {}
+    board = QemuBoard(elf, build=build)
+    machine = options.get("machine", "mps2-an386")
+    cpu = options.get("cpu", "cortex-m4" if machine == "mps2-an386" else None)
+    base_command = board.command
+
+    def command(port: int) -> list[str]:
+        cmd = base_command(port)
+        cmd[cmd.index("-M") + 1] = machine
+        at = cmd.index("-cpu")
+        if cpu is None:
+            del cmd[at:at + 2]
+        else:
+            cmd[at + 1] = cpu
+        return cmd
+
+    board.command = command
+    try:
+        board.start()
+    except (QemuBoardError, OSError) as exc:
+        raise LinkError(f"link '{spec}': {exc}") from exc
+    try:
+        link = open_link(f"serial:{board.serial_url}")
+    except Exception:
+        board.stop()
+        raise
+    # An emulator starting up and running under -icount may take longer (SPEC 2.8).
+    conn = BoardConnection(spec, link, hello_wait_s=10.0, answer_wait_min_s=2.0,
+                           process=board.process, _output=lambda: board.output().splitlines())
+    conn._cleanups.append(board.stop)
+    return conn
+
+
+def _serial_link(rest: str, spec: str) -> BoardConnection:
+    return BoardConnection(spec, open_link(spec))
+
+
+def _can_link(rest: str, spec: str) -> BoardConnection:
+    return BoardConnection(spec, open_link(spec, role=Role.BENCH))
+
+
+BUILTIN_TYPES: dict[str, Callable[[str, str], BoardConnection]] = {
+    "exec": _exec_link, "lib": _lib_link, "qemu": _qemu_link,
+    "serial": _serial_link, "can": _can_link,
+}
+
+
+def _alias(spec: str) -> BoardConnection | None:
+    if spec == "stub":
+        return _stub_link(spec)
+    if spec in ("stub-pty", "stub-can"):
+        ensure_built()
+        mode, transport = (("--stdio", "serial") if spec == "stub-pty"
+                           else ("--slcan-stdio", "slcan"))
+        return spawn_on_pty(spec, [str(EXECUTABLE_PATH), mode], transport)
+    if spec == "qemu":
+        return _qemu_link("", spec, build=True)
+    return None
+
+
+def entry_point_types() -> dict[str, Any]:
+    """Third-party link types: the ``hil.links`` entry points by name (not loaded yet)."""
+    from importlib.metadata import entry_points
+
+    return {ep.name: ep for ep in entry_points(group=ENTRY_POINT_GROUP)}
+
+
+def link_types() -> list[str]:
+    """Every link type name: the built-ins, their stub aliases and the entry points."""
+    return ["stub", "stub-pty", "stub-can", "qemu", *BUILTIN_TYPES,
+            *sorted(set(entry_point_types()) - set(BUILTIN_TYPES))]
 
 
 def connect(spec: str) -> BoardConnection:
     """Opens the board named by ``spec``; raises LinkError naming what was wrong."""
-    if spec == "stub":
-        return BoardConnection(spec, StubLibraryLink(), hello_timeout_s=0.5, answer_timeout_s=0.0)
-    if spec in ("stub-pty", "stub-can"):
-        master, slave, slave_path = _pty_pair()
-        mode = ["--stdio"] if spec == "stub-pty" else ["--slcan-stdio"]
-        try:
-            proc = _spawn_stub(mode, master)
-        finally:
-            os.close(master)  # the child holds it now
-        try:
-            if spec == "stub-pty":
-                link = open_link(f"serial:{slave_path}?baud=2000000")
-            else:
-                link = open_link(f"can:slcan:{slave_path}?bitrate=1000000", role=Role.BENCH,
-                                 sleep_after_open=0)
-        except Exception:
-            _stop_process(proc)
-            raise
-        finally:
-            os.close(slave)
-        conn = BoardConnection(spec, link, hello_timeout_s=3.0, answer_timeout_s=0.5, process=proc)
-        conn._cleanups.append(lambda: _stop_process(proc))
+    conn = _alias(spec)
+    if conn is not None:
         return conn
-    if spec == "qemu":
-        from hil.links.qemu import QemuBoard
+    scheme, sep, rest = spec.partition(":")
+    if sep and scheme in BUILTIN_TYPES:
+        return BUILTIN_TYPES[scheme](rest, spec)
+    if sep:
+        found = entry_point_types().get(scheme)
+        if found is not None:
+            try:
+                factory = found.load()
+            except Exception as exc:  # noqa: BLE001 - a broken plug-in is named, not raised raw
+                raise LinkError(f"link '{spec}': link type '{scheme}' (entry point {found.value} "
+                                f"in group {ENTRY_POINT_GROUP}) cannot be loaded: {exc}") from exc
+            made = factory(rest, spec)
+            if isinstance(made, BoardConnection):
+                return made
+            if isinstance(made, Link) or (hasattr(made, "send") and hasattr(made, "recv")):
+                return BoardConnection(spec, made)
+            raise LinkError(f"link '{spec}': link type '{scheme}' returned {type(made).__name__}, "
+                            "not a BoardConnection or a Link")
+    if ("/" in spec and not sep) or "://" in spec:
+        # A bare path: pyserial's serial_for_url convention (a device or a URL).
+        return BoardConnection(spec, open_link(spec))
+    raise LinkError(f"unknown link '{spec}'; expected one of: {', '.join(LINK_CHOICES)}"
+                    + _plugins_hint())
 
-        board = QemuBoard()
-        board.__enter__()
-        try:
-            link = open_link(f"serial:{board.serial_url}")
-        except Exception:
-            board.__exit__(None, None, None)
-            raise
-        conn = BoardConnection(spec, link, hello_timeout_s=10.0, answer_timeout_s=2.0,
-                               process=board.process)
-        conn._cleanups.append(lambda: board.__exit__(None, None, None))
-        return conn
-    if spec.startswith("serial:") or spec.startswith("can:"):
-        kwargs = {"role": Role.BENCH} if spec.startswith("can:") else {}
-        return BoardConnection(spec, open_link(spec, **kwargs), hello_timeout_s=3.0,
-                               answer_timeout_s=0.5)
-    raise LinkError(f"unknown link '{spec}'; expected one of: {', '.join(LINK_CHOICES)}")
+
+def _plugins_hint() -> str:
+    extra = sorted(set(entry_point_types()) - set(BUILTIN_TYPES))
+    return f"; link types from entry points ({ENTRY_POINT_GROUP}): {', '.join(extra)}" if extra else ""

@@ -2,7 +2,8 @@
 
 The session is the only place where periods happen. Per period, in lockstep:
 the plant's sensors are sampled at t_k and sent as SAMPLE k; the board's GATES k
-is awaited (for ``answer_timeout_s`` of wall time); the plant integrates
+is awaited (one deadline per SAMPLE sent, resent up to answer_resends times: SPEC.md
+2.8, hil/session/policy.py); the plant integrates
 [t_k, t_k+1] with it (holding the previous gates when none came). Everything
 that crossed is recorded in memory (for checks) and in the MCAP log.
 
@@ -14,6 +15,8 @@ board's process is stopped and the log is closed readable.
 from __future__ import annotations
 
 import math
+import struct
+import sys
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -21,7 +24,7 @@ from typing import Any, Callable
 
 from plant_rt import Plant, TRUTH_FIELDS
 from protocol.messages import (
-    PROTOCOL_VERSION, Command, Fault, Gates, Duty, Hello, ParamGet, ParamId, ParamSet,
+    PROTOCOL_VERSION, Command, Fault, FaultCode, Gates, Duty, Hello, ParamGet, ParamId, ParamSet,
     ParamValue, Role, Sample, Shutdown, SpeedSource, Status, Telemetry,
 )
 
@@ -31,6 +34,7 @@ from hil.session.board_params import board_parameters
 from hil.session.cpu_latency import CpuLatencyHold
 from hil.session.errors import SessionError
 from hil.session.link_tap import LinkTap, tappable
+from hil.session.policy import CAPABILITY_NAMES, SessionPolicy
 from hil.session.realtime import run_realtime
 from hil.session.watchdog import Watchdog, await_answer
 
@@ -44,12 +48,15 @@ class SessionConfig:
     mode: str = "lockstep"                  # lockstep | realtime
     log_path: Path | None = None
     seed: int = 0
-    # Consecutive periods without a GATES answer before the watchdog safe-states the plant,
-    # and (when set) the wall-clock time without one, whichever comes first.
-    watchdog_periods: int = 20
+    # SPEC.md 2.8's session policy: None takes the bench profile's `session` section (its
+    # defaults are SPEC's); a value here overrides it (tests, CLI options).
+    policy: SessionPolicy | None = None
+    watchdog_periods: int | None = None
     watchdog_s: float | None = None
-    hello_timeout_s: float | None = None    # None: the link's own default
-    answer_timeout_s: float | None = None
+    answer_resends: int | None = None
+    hello_tries: int | None = None
+    hello_timeout_s: float | None = None    # the HELLO wait per try (policy hello_wait_s)
+    answer_timeout_s: float | None = None   # the lockstep answer wait per SAMPLE sent
     realtime_period_s: float | None = None  # None: the profile's control period
     realtime_miss_budget: int = 1000        # deadline misses before a realtime run ends in ERROR
     # Frames pass through a LinkTap (raw-frame log, link-fault injection) where the link
@@ -106,8 +113,20 @@ class BenchSession:
         self.faults: list[Fault] = []
         self.events: list[tuple[float, str, dict]] = []
         self.missed_answers = 0
-        self.watchdog = Watchdog(self.config.watchdog_periods, self.config.watchdog_s)
+        self.policy = _policy(profile, self.config)
+        self.hello_wait_s = self.policy.hello_wait_s
+        self.answer_wait_s = self.policy.answer_wait_s(self.period_s)
+        self.watchdog = Watchdog(self.policy.watchdog_periods,
+                                 self.policy.effective_watchdog_s(self.period_s))
         self.stale_answers = 0
+        self.resent_samples = 0
+        self.board_faults = 0
+        self.shoot_throughs = 0
+        self._answer_kind: type | None = None    # GATES or DUTY, the first the board answered
+        self._streak_others: set[str] = set()    # non-answer types received while periods miss
+        self._streak_stale = 0
+        self._last_stale: tuple[str, int] | None = None
+        self._drained_period = -1
         self.error: str | None = None
         self.on_period = on_period
         self._gates = 0
@@ -147,13 +166,47 @@ class BenchSession:
         self.conn = connect(cfg.link)
         if cfg.tap_link and tappable(self.conn.link):
             self.tap = self.conn.link = LinkTap(self.conn.link, seed=cfg.seed)
-        if cfg.hello_timeout_s is not None:
-            self.conn.hello_timeout_s = cfg.hello_timeout_s
-        if cfg.answer_timeout_s is not None:
-            self.conn.answer_timeout_s = cfg.answer_timeout_s
-        self._handshake()
-        self._push_parameters(board_parameters(self.profile))
+        self._apply_link_waits()
+        try:
+            self._handshake()
+            self._push_parameters(board_parameters(self.profile))
+        except SessionError as exc:
+            self.plant.safe_state()
+            self.error = str(exc)
+            self._event("refused", {"reason": str(exc)})
+            raise
         self.send_command()
+
+    def _apply_link_waits(self) -> None:
+        """SPEC 2.8: a link that starts the board itself may raise the waits (QEMU); the
+        in-process library answers within the call (wait 0). SessionConfig overrides both."""
+        cfg, conn, policy = self.config, self.conn, self.policy
+        hello = policy.hello_wait_s
+        if conn.hello_wait_s is not None:
+            hello = 0.0 if conn.hello_wait_s == 0.0 else max(hello, conn.hello_wait_s)
+        min_s = policy.answer_wait_min_s
+        if conn.answer_wait_min_s is not None:
+            min_s = 0.0 if conn.answer_wait_min_s == 0.0 else max(min_s, conn.answer_wait_min_s)
+        answer = max(policy.answer_wait_periods * self.period_s, min_s)
+        if conn.answer_wait_min_s == 0.0:
+            answer = 0.0
+        self.hello_wait_s = hello if cfg.hello_timeout_s is None else cfg.hello_timeout_s
+        self.answer_wait_s = answer if cfg.answer_timeout_s is None else cfg.answer_timeout_s
+        watchdog_s = max(policy.watchdog_s, (1 + policy.answer_resends) * self.answer_wait_s)
+        self.watchdog = Watchdog(policy.watchdog_periods, watchdog_s)
+
+    def _where(self) -> str:
+        return f"board on '{self.config.link}'"
+
+    def _with_report(self, text: str) -> str:
+        """Appends how the board process ended (exit status, last stderr lines), if it did."""
+        report = self.conn.report() if self.conn is not None else ""
+        return f"{text}; {report}" if report else text
+
+    def _rx_decoder(self):
+        """The stream decoder that sees what the board sends (the tap's, or the link's)."""
+        link = self.conn.link
+        return getattr(link, "_decoder", None) or getattr(link, "decoder", None)
 
     def _metadata(self) -> dict[str, dict[str, str]]:
         import platform
@@ -170,54 +223,140 @@ class BenchSession:
         meta.update(self.config.metadata)
         return meta
 
-    def _await(self, predicate: Callable[[Any], bool], timeout_s: float, what: str):
+    def _await(self, predicate: Callable[[Any], bool], timeout_s: float, what: str,
+               check: Callable[[], None] | None = None):
         """Receives until a message satisfies predicate within one deadline; other messages
-        are dispatched and do not extend it."""
-        msg = await_answer(self.conn.link, predicate, timeout_s, self.dispatch)
-        if msg is not None:
-            return msg
-        if not self.conn.board_alive():
-            raise SessionError(f"board on '{self.config.link}' exited with status "
-                               f"{self.conn.board_exit_status()} while waiting for {what}")
-        raise SessionError(f"no {what} from the board on '{self.config.link}' within "
-                           f"{timeout_s:g} s")
+        are dispatched and do not extend it. None when the deadline passed."""
+        return await_answer(self.conn.link, predicate, timeout_s, self.dispatch, check=check,
+                            slice_s=0.05 if check is not None else None)
+
+    def _check_version(self) -> None:
+        dec = self._rx_decoder()
+        if dec is not None and dec.version_errors:
+            raise SessionError(self._with_report(
+                f"{self._where()} sends frames of protocol version {dec.last_bad_version}, "
+                f"the bench speaks version {PROTOCOL_VERSION}"))
 
     def _handshake(self) -> None:
-        link = self.conn.link
-        link.send(Hello(proto_version=PROTOCOL_VERSION, role=int(Role.BENCH), capabilities=0,
-                        control_period_ns=round(self.period_s * 1e9), name_len=len(b"hil-bench"),
-                        name=b"hil-bench"))
-        hello = self._await(lambda m: isinstance(m, Hello), self.conn.hello_timeout_s, "HELLO")
+        """SPEC 2.8 and 2.8.4: HELLO up to hello_tries times, then the refusals."""
+        link, policy = self.conn.link, self.policy
+        period_ns = round(self.period_s * 1e9)
+        mine = Hello(proto_version=PROTOCOL_VERSION, role=int(Role.BENCH), capabilities=0,
+                     control_period_ns=period_ns, name_len=len(b"hil-bench"), name=b"hil-bench")
+        self._seen_during_hello: dict[str, int] = {}
+        hello = None
+        tries = policy.hello_tries if self.config.hello_tries is None else self.config.hello_tries
+        for _ in range(tries):
+            link.send(mine)
+            hello = self._await(lambda m: isinstance(m, Hello), self.hello_wait_s, "HELLO",
+                                check=self._check_version)
+            if hello is not None:
+                break
+            if not self.conn.board_alive():
+                break
+        if hello is None:
+            raise SessionError(self._with_report(
+                f"no HELLO from the {self._where()} after {tries} tries of "
+                f"{self.hello_wait_s:g} s: {self._hello_silence()}"))
+        where = self._where()
         if hello.proto_version != PROTOCOL_VERSION:
-            raise SessionError(
-                f"board on '{self.config.link}' speaks protocol version {hello.proto_version}, "
-                f"the bench speaks version {PROTOCOL_VERSION}")
+            raise SessionError(f"{where} speaks protocol version {hello.proto_version}, "
+                               f"the bench speaks version {PROTOCOL_VERSION}")
+        if hello.role != int(Role.CONTROLLER):
+            role = {0: " (bench)"}.get(hello.role, "")
+            raise SessionError(f"{where} says role {hello.role}{role} in its HELLO; "
+                               f"a controller is role {int(Role.CONTROLLER)}")
+        caps = hello.capabilities
+        if not caps & 0x3:
+            raise SessionError(f"{where} advertises neither GATES nor DUTY "
+                               f"(capabilities 0x{caps:04x})")
+        for name in policy.require_capabilities:
+            if not caps & (1 << CAPABILITY_NAMES.index(name)):
+                raise SessionError(f"{where} lacks capability {name}, required by the profile "
+                                   f"(session.require_capabilities)")
+        if hello.control_period_ns not in (0, period_ns):
+            raise SessionError(f"{where} was built for a control period of "
+                               f"{hello.control_period_ns} ns, the bench runs {period_ns} ns")
         self.board_hello = hello
         self._event("hello", {"board": _name(hello), "proto_version": hello.proto_version,
-                              "capabilities": hello.capabilities,
-                              "control_period_ns": hello.control_period_ns})
+                              "capabilities": caps, "control_period_ns": hello.control_period_ns})
+
+    def _hello_silence(self) -> str:
+        """What arrived instead of a HELLO: every non-zero error counter (SPEC 2.9)."""
+        counters = self.conn.link.counters
+        words = {"crc_errors": "frames failed their CRC", "framing_errors": "framing errors",
+                 "seq_gaps": "sequence gaps", "unknown_types": "frames of unknown types",
+                 "length_errors": "length errors", "sequence_errors": "CAN sequence errors",
+                 "ignored_frames": "ignored CAN frames", "own_role_frames": "frames with the bench's own role"}
+        parts = [f"{counters[k]} {w}" for k, w in words.items() if counters.get(k)]
+        seen = [f"{n} {t}" for t, n in self._seen_during_hello.items()]
+        if seen:
+            parts.append("received only " + ", ".join(seen))
+        if not parts:
+            return "nothing received"
+        text = ", ".join(parts)
+        if counters.get("crc_errors") or counters.get("framing_errors"):
+            text += " (wrong baud rate or a noisy line?)"
+        return text
 
     def _push_parameters(self, params: dict[str, float]) -> None:
+        caps = self.board_hello.capabilities if self.board_hello is not None else 0xFFFF
         for name, value in params.items():
+            if name == "telemetry_divider" and not caps & 0x4:
+                self._event("param_skipped", {"name": name, "reason": "the board does not "
+                                              "advertise the TELEMETRY capability"})
+                continue
             self.param_set(name, value)
 
+    def _param_exchange(self, msg, pid: int, what: str) -> ParamValue:
+        """Sends msg and waits param_wait_s for the PARAM_VALUE of pid, param_tries times."""
+        policy = self.policy
+        wait = policy.param_wait_s if self.hello_wait_s > 0.0 else 0.0
+        for _ in range(policy.param_tries):
+            self.conn.link.send(msg)
+            answer = self._await(lambda m: isinstance(m, ParamValue) and m.id == pid, wait, what)
+            if answer is not None:
+                return answer
+            if not self.conn.board_alive():
+                break
+        raise SessionError(self._with_report(
+            f"{self._where()}: no PARAM_VALUE for {what} after {policy.param_tries} tries of "
+            f"{wait:g} s"))
+
     def param_set(self, name: str, value: float) -> float:
-        """PARAM_SET then PARAM_GET: returns the value the board reads back (float32)."""
+        """PARAM_SET then PARAM_GET (SPEC 2.8.3): returns the value in force (float32)."""
         pid = ParamId[name.upper()]
-        link = self.conn.link
-        link.send(ParamSet(id=int(pid), value=float(value)))
-        answer = self._await(lambda m: isinstance(m, ParamValue) and m.id == pid,
-                             self.conn.hello_timeout_s, f"PARAM_VALUE for {name}")
-        if answer.status != 0:
-            raise SessionError(f"board refused parameter {name} = {value:g} "
-                               f"(status {answer.status}: {_param_status(answer.status)})")
-        link.send(ParamGet(id=int(pid)))
-        readback = self._await(lambda m: isinstance(m, ParamValue) and m.id == pid,
-                               self.conn.hello_timeout_s, f"PARAM_VALUE readback of {name}")
-        if not math.isclose(readback.value, value, rel_tol=1e-6, abs_tol=1e-12):
-            raise SessionError(f"parameter {name}: set {value!r}, board reads back {readback.value!r}")
+        where = self._where()
+        answer = self._param_exchange(ParamSet(id=int(pid), value=float(value)), int(pid),
+                                      f"parameter {name} (PARAM_SET)")
+        status = answer.status
+        if status == 1:
+            raise SessionError(f"{where} does not know parameter {name} (id {int(pid)}, "
+                               f"status 1 UNKNOWN)")
+        if status != 0:
+            raise SessionError(f"{where} refused parameter {name} = {value:g} (status {status} "
+                               f"{_param_status(status)}; keeps {answer.value:g})")
+        requested = _f32(value)
+        clamped = _f32(answer.value) != requested
+        if clamped and pid == ParamId.CONTROL_PERIOD_S:
+            raise SessionError(f"{where} was built for a control period of "
+                               f"{round(answer.value * 1e9)} ns, the bench runs "
+                               f"{round(self.period_s * 1e9)} ns (CONTROL_PERIOD_S {value:g} "
+                               f"answered {answer.value:g})")
+        readback = self._param_exchange(ParamGet(id=int(pid)), int(pid),
+                                        f"parameter {name} (PARAM_GET)")
+        if readback.status != 0 or _f32(readback.value) != _f32(answer.value):
+            raise SessionError(f"{where}: parameter {name}: PARAM_SET answered {answer.value:g}, "
+                               f"PARAM_GET reads back {readback.value:g} (status {readback.status})")
         self.board_params[name] = readback.value
-        self._event("param", {"name": name, "value": readback.value})
+        if clamped:
+            text = (f"parameter {name}: requested {value:g}, the board clamped it to "
+                    f"{answer.value:g} (in force)")
+            print(f"hil: warning: {text}", file=sys.stderr)
+            self._event("param_clamped", {"name": name, "requested": float(value),
+                                          "value": readback.value})
+        else:
+            self._event("param", {"name": name, "value": readback.value})
         return readback.value
 
     # -------------------------------------------------------------- commands
@@ -256,12 +395,20 @@ class BenchSession:
             self.faults.append(msg)
             self.recorder.step_value("ctrl.fault_code", msg.period, msg.code)
             self._event("board_fault", {"code": msg.code, "period": msg.period, "value": msg.value})
+            self.board_faults += 1
+            if self.board_faults == 1:
+                print(f"hil: warning: {_fault_text(msg, self.period_s)}", file=sys.stderr)
         elif t is Status:
             self.recorder.step_value("ctrl.fault_code", msg.period, msg.fault_code)
             self._event("board_status", {"state": msg.state, "fault_code": msg.fault_code,
                                          "period": msg.period})
         elif t is Gates or t is Duty:
             self.stale_answers += 1
+            self._last_stale = (t.__name__.upper(), msg.period)
+        if self.board_hello is None and self.conn is not None:
+            seen = self._seen_during_hello
+            name = t.__name__.upper()
+            seen[name] = seen.get(name, 0) + 1
         # HEARTBEAT, late PARAM_VALUEs: nothing to do beyond the raw-frame log
 
     # --------------------------------------------------------------- running
@@ -272,11 +419,14 @@ class BenchSession:
         return self._run_lockstep(count, stop)
 
     def _run_lockstep(self, count: int, stop: Callable[[], bool] | None) -> int:
+        """SPEC 2.8.1: one deadline per SAMPLE sent; SAMPLE(k) is resent (same values) up to
+        answer_resends times before period k counts as missed and the plant holds its gates."""
         plant = self.plant
         link = self.conn.link
         recorder = self.recorder
         dispatch = self.dispatch
-        answer_timeout = self.conn.answer_timeout_s
+        answer_timeout = self.answer_wait_s
+        sends = 1 + self.policy.answer_resends
         watchdog = self.watchdog
         mailbox = self._mailbox
         on_period = self.on_period
@@ -294,58 +444,82 @@ class BenchSession:
                     recorder.frames(k, tap.take_capture())
             recorder.period(k, plant.truth(), sample)
             gates = duty = None
+            others = None
+            msg_out = Sample(k, sample.adc_i1, sample.adc_i2, sample.adc_vdc, sample.encoder,
+                             sample.status)
+            first_sent = None
             try:
-                link.send(Sample(k, sample.adc_i1, sample.adc_i2, sample.adc_vdc, sample.encoder,
-                                 sample.status))
-                # One deadline per SAMPLE: other traffic is handled but never extends it.
-                deadline = clock() + answer_timeout
-                wait = answer_timeout
-                msg = link.recv(wait)
-                while msg is not None:
-                    t = type(msg)
-                    if t is Gates:
-                        if msg.period == k:
-                            gates = msg.gates
-                            break
-                        self.stale_answers += 1
-                    elif t is Duty:
-                        if msg.period == k:
-                            d = msg.duty
-                            duty = (d[0] / 65535.0, d[1] / 65535.0, d[2] / 65535.0)
-                            break
-                        self.stale_answers += 1
-                    else:
-                        dispatch(msg)
-                    if wait > 0.0:
-                        wait = deadline - clock()
-                        if wait <= 0.0:
-                            wait = -1.0       # past the deadline: take only what is queued
-                    if wait < 0.0:
-                        msg = link.recv(0.0)
-                        if msg is not None and clock() > deadline + answer_timeout:
-                            break             # a flood: the period is lost
-                    else:
-                        msg = link.recv(wait)
+                for attempt in range(sends):
+                    if attempt:
+                        self.resent_samples += 1
+                    link.send(msg_out)
+                    # One deadline per SAMPLE: other traffic is handled but never extends it.
+                    deadline = clock() + answer_timeout
+                    if first_sent is None:
+                        first_sent = deadline - answer_timeout
+                    wait = answer_timeout
+                    msg = link.recv(wait)
+                    while msg is not None:
+                        t = type(msg)
+                        if t is Gates:
+                            if msg.period == k:
+                                gates = msg.gates
+                                break
+                            self.stale_answers += 1
+                            self._last_stale = ("GATES", msg.period)
+                        elif t is Duty:
+                            if msg.period == k:
+                                d = msg.duty
+                                duty = (d[0] / 65535.0, d[1] / 65535.0, d[2] / 65535.0)
+                                break
+                            self.stale_answers += 1
+                            self._last_stale = ("DUTY", msg.period)
+                        else:
+                            dispatch(msg)
+                            if others is None:
+                                others = set()
+                            others.add(t.__name__.upper())
+                        if wait > 0.0:
+                            wait = deadline - clock()
+                            if wait <= 0.0:
+                                wait = -1.0       # past the deadline: take only what is queued
+                        if wait < 0.0:
+                            msg = link.recv(0.0)
+                            if msg is not None and answer_timeout > 0.0 and \
+                                    clock() > deadline + answer_timeout:
+                                break             # a flood: this wait is lost
+                        else:
+                            msg = link.recv(wait)
+                    if gates is not None or duty is not None:
+                        break
             except (OSError, ValueError) as exc:  # LinkError is an OSError: the line is gone
                 self._link_failed(k, exc)
             if gates is None and duty is None:
                 self.missed_answers += 1
-                why = watchdog.missed()
+                if others:
+                    self._streak_others |= others
+                if watchdog.consecutive == 0:
+                    self._streak_first = k
+                    self._streak_stale = self.stale_answers
+                why = watchdog.missed(since=first_sent)
+                self._event("missed", {"period": k, "samples_sent": sends})
                 if why is not None:
-                    plant.safe_state()
-                    if not self.conn.board_alive():
-                        why = ("the board process exited with status "
-                               f"{self.conn.board_exit_status()}")
-                    self.error = f"watchdog at period {k} (t = {k * self.period_s:.6f} s): {why}"
-                    self._event("watchdog", {"period": k, "reason": why})
-                    raise SessionError(self.error)
+                    self._watchdog_tripped(k, sends)
                 plant.step(None)
             else:
+                if watchdog.consecutive:
+                    self._streak_others.clear()
                 watchdog.answered()
                 if duty is None:
+                    if gates & (gates >> 1) & 0x15:
+                        self._shoot_through(k, gates)
                     plant.step(gates)
+                    if self._answer_kind is not Gates:
+                        self._note_answer_kind(Gates)
                 else:
                     plant.step(duty=duty)
+                    if self._answer_kind is not Duty:
+                        self._note_answer_kind(Duty)
             if on_period is not None:
                 on_period(k)
             if mailbox is not None and k % publish_every == 0:
@@ -354,22 +528,75 @@ class BenchSession:
                 return done + 1
         return count
 
+    def _note_answer_kind(self, kind: type) -> None:
+        """SPEC 2.8.4: a board answering with a type it does not advertise is accepted, logged once."""
+        first = self._answer_kind is None
+        self._answer_kind = kind
+        caps = self.board_hello.capabilities if self.board_hello is not None else 0x3
+        bit = 0x1 if kind is Gates else 0x2
+        if first and not caps & bit:
+            self._event("answer_type", {"type": kind.__name__.upper(), "capabilities": caps,
+                                        "note": "answers with a type it does not advertise"})
+        elif not first:
+            self._event("answer_type", {"type": kind.__name__.upper(),
+                                        "note": "the board switched answer type"})
+
+    def _shoot_through(self, k: int, gates: int) -> None:
+        self.shoot_throughs += 1
+        if self.shoot_throughs > 1:
+            return
+        legs = [leg for leg, bit in (("A", 0x01), ("B", 0x04), ("C", 0x10))
+                if gates & bit and gates & (bit << 1)]
+        turns = ", ".join(f"{leg} high and {leg} low" for leg in legs)
+        text = (f"period {k} (t = {k * self.period_s:.6g} s): GATES 0x{gates:02x} turns on {turns} "
+                f"together (shoot-through); the plant's driver trip opened leg {', '.join(legs)}")
+        print(f"hil: warning: {text}", file=sys.stderr)
+        self._event("shoot_through", {"period": k, "gates": gates, "legs": legs})
+
+    def _watchdog_tripped(self, k: int, sends: int) -> None:
+        """SPEC 2.9's watchdog messages: silent, only other traffic, or stale answers."""
+        self.plant.safe_state()
+        wd = self.watchdog
+        first = getattr(self, "_streak_first", k)
+        stale = self.stale_answers - self._streak_stale
+        if stale:
+            last = self._last_stale
+            why = (f"no GATES/DUTY for period {first} in {wd.elapsed_s:.1f} s; the board answered "
+                   f"{stale} times with other periods (last: {last[0]} for period {last[1]}): "
+                   f"stale answers")
+        else:
+            span = f"period {first}" if first == k else f"periods {first}..{k}"
+            why = (f"no GATES/DUTY for {wd.consecutive} consecutive periods ({span}, {sends} "
+                   f"SAMPLEs each, {wd.elapsed_s:.1f} s), ")
+            others = sorted(self._streak_others)
+            why += f"board sent only {', '.join(others)}" if others else "board silent"
+        why = self._with_report(why)
+        self.error = (f"watchdog: {why}; at period {k} (t = {k * self.period_s:.6f} s) on "
+                      f"'{self.config.link}'")
+        self._event("watchdog", {"period": k, "reason": why})
+        raise SessionError(self.error)
+
     @property
     def consecutive_misses(self) -> int:
         return self.watchdog.consecutive
 
     def _link_failed(self, k: int, exc: Exception) -> None:
         self.plant.safe_state()
-        status = self.conn.board_exit_status()
-        board = f"; the board process exited with status {status}" if status is not None else ""
-        self.error = f"link failed at period {k} (t = {k * self.period_s:.6f} s): {exc}{board}"
+        if self.conn.process is not None and self.conn.board_alive():
+            try:    # a process that closed its line is usually exiting: let its status arrive
+                self.conn.process.wait(0.5)
+            except Exception:  # noqa: BLE001
+                pass
+        self.error = self._with_report(
+            f"link failed at period {k} (t = {k * self.period_s:.6f} s): {exc}")
         self._event("link_failed", {"period": k, "reason": str(exc)})
         raise SessionError(self.error) from exc
 
     def drain(self) -> None:
         """Collects what the board sent after the last GATES (its last TELEMETRY)."""
+        self._drained_period = self.plant.period
         link = self.conn.link
-        wait_s = min(self.conn.answer_timeout_s, 0.05)
+        wait_s = min(self.answer_wait_s, 0.05)
         msg = link.recv(wait_s)
         deadline = time.monotonic() + 0.5    # a chatty board cannot hold teardown
         while msg is not None:
@@ -427,6 +654,15 @@ class BenchSession:
             self.plant.safe_state()
         except Exception as exc:  # noqa: BLE001
             errors.append(exc)
+        if self.conn is not None and self.board_hello is not None and \
+                self._drained_period != self.plant.period and self.conn.board_alive():
+            try:
+                self.drain()     # the last period's TELEMETRY, FAULT, STATUS: into the log
+            except Exception:  # noqa: BLE001 - a dead line has nothing more to say
+                pass
+        if self.shoot_throughs > 1 or self.board_faults > 1:
+            print(f"hil: {self.shoot_throughs} shoot-through periods, {self.board_faults} board "
+                  f"FAULTs in this session (the first of each printed above)", file=sys.stderr)
         if self.conn is not None:
             try:
                 self.conn.link.send(Shutdown())
@@ -454,8 +690,36 @@ class BenchSession:
 
     def link_counters(self) -> dict[str, Any]:
         counters = dict(self.conn.link.counters) if self.conn is not None else {}
-        counters.update(missed_answers=self.missed_answers, stale_answers=self.stale_answers)
+        counters.update(missed_answers=self.missed_answers, stale_answers=self.stale_answers,
+                        resent_samples=self.resent_samples, shoot_throughs=self.shoot_throughs,
+                        board_faults=self.board_faults)
         return counters
+
+
+def _policy(profile, config: SessionConfig) -> SessionPolicy:
+    """The profile's session section (SPEC 2.8's defaults) with SessionConfig's overrides."""
+    policy = config.policy if config.policy is not None else SessionPolicy.from_profile(profile)
+    changes = {key: getattr(config, key) for key in ("watchdog_periods", "watchdog_s",
+                                                     "answer_resends", "hello_tries")
+               if getattr(config, key) is not None}
+    return replace(policy, **changes) if changes else policy
+
+
+def _f32(value: float) -> bytes:
+    return struct.pack("<f", value)
+
+
+_FAULT_UNITS = {1: "A", 2: "s", 3: "V", 4: "s"}
+
+
+def _fault_text(msg: Fault, period_s: float) -> str:
+    try:
+        name = FaultCode(msg.code).name
+    except ValueError:
+        name = "UNKNOWN"
+    unit = _FAULT_UNITS.get(msg.code, "")
+    return (f"period {msg.period} (t = {msg.period * period_s:.6g} s): board FAULT {msg.code} "
+            f"{name}, value {msg.value:.4g}{' ' + unit if unit else ''}")
 
 
 def _name(hello: Hello) -> str:
@@ -466,7 +730,7 @@ def _name(hello: Hello) -> str:
 
 
 def _param_status(status: int) -> str:
-    return {1: "unknown parameter", 2: "out of range", 3: "read-only"}.get(status, "error")
+    return {1: "UNKNOWN", 2: "OUT_OF_RANGE", 3: "READ_ONLY"}.get(status, "error")
 
 
 def _flatten(d: dict, prefix: str = "") -> dict[str, Any]:

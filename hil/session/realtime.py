@@ -131,9 +131,9 @@ def run_realtime(session, count: int, stop: Callable[[], bool] | None = None,
             if why is not None:
                 plant.safe_state()
                 session.rt_answered_period = answered_period
-                if not session.conn.board_alive():
-                    why = f"the board process exited with status {session.conn.board_exit_status()}"
-                session.error = f"watchdog at period {k} (t = {k * session.period_s:.6f} s): {why}"
+                why = session._with_report(why)
+                session.error = (f"watchdog: {why}; at period {k} (t = {k * session.period_s:.6f} s) "
+                                 f"on '{session.config.link}'")
                 session.event("watchdog", period=k, reason=why)
                 _store(stats, lateness, period_s, late_answers, missing, overruns)
                 raise SessionError(session.error)
