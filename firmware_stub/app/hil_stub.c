@@ -47,6 +47,8 @@ typedef struct {
     hil_stub_counters counters;
     uint32_t (*read_cycles)(void);
     uint32_t next_period;   /* the period the next SAMPLE is expected to carry */
+    hil_msg last_answer;    /* GATES or DUTY of the last SAMPLE, repeated for a resent one */
+    uint8_t have_answer;    /* last_answer is valid (a SAMPLE was answered since HELLO) */
     uint32_t heartbeats;    /* HEARTBEATs sent */
     uint32_t version_errors_seen; /* decoder version errors already answered with HELLO */
     uint16_t can_base;
@@ -161,6 +163,12 @@ static void report_fault(hil_stub *s)
 static void on_sample(hil_stub *s, const hil_sample *sample)
 {
     hil_msg m;
+    if (s->have_answer && sample->period + 1u == s->next_period) {
+        /* SPEC.md 2.8.1: a resent SAMPLE (same period) gets the same answer again, without a
+         * second control step: the bench lost the first answer, the simulation must not change */
+        emit(s, &s->last_answer);
+        return;
+    }
     s->next_period = sample->period + 1u;
     uint32_t div = s->core.params.telemetry_divider;
     int want_telemetry = div != 0u && sample->period % div == 0u;
@@ -183,6 +191,8 @@ static void on_sample(hil_stub *s, const hil_sample *sample)
         g.u.gates.gates = gates;
     }
     emit(s, &g);
+    s->last_answer = g;
+    s->have_answer = 1u;
     if (want_telemetry) {
         m.type = HIL_MSG_TELEMETRY;
         emit(s, &m);
@@ -239,6 +249,7 @@ static void dispatch(hil_stub *s, const hil_msg *in)
         /* SPEC.md 2.1: answer every HELLO; after one naming another version,
          * ignore everything but HELLO */
         s->peer_version_bad = in->u.hello.proto_version != HIL_PROTO_VERSION;
+        s->have_answer = 0u; /* a new session: period 0 is a new SAMPLE, not a resend */
         emit_hello(s);
         s->counters.frames_in++;
         return;

@@ -148,6 +148,52 @@ static void samples_answered_with_gates_and_telemetry(void **state)
     bench_close(&b);
 }
 
+/* SPEC.md 2.8.1: the bench resends SAMPLE(k) when it lost the answer; the board answers the
+ * copy with the same GATES and does not step its controller again (a second step would change
+ * the run). Compared with a board that got each SAMPLE once. */
+static void resent_sample_gets_the_same_answer_without_a_second_step(void **state)
+{
+    (void)state;
+    bench once, twice;
+    bench_open(&once);
+    bench_open(&twice);
+    hil_msg m = msg_command(HIL_CMD_ENABLE, HIL_SPEED_EKF, 100.0f);
+    bench_send(&once, &m);
+    bench_send(&twice, &m);
+    for (uint32_t k = 0; k < 30; ++k) {
+        hil_msg s = msg_sample(k, 0.3 * k, 0.1, (uint16_t)(7u * k));
+        bench_send(&once, &s);
+        size_t before = twice.n_replies;
+        bench_send(&twice, &s);
+        size_t first_answer = twice.n_replies;
+        bench_send(&twice, &s); /* the resend */
+        assert_int_equal(twice.n_replies, first_answer + 1u); /* the answer only, no TELEMETRY */
+        assert_int_equal(twice.replies[first_answer].type, HIL_MSG_GATES);
+        assert_int_equal(twice.replies[first_answer].u.gates.period, k);
+        assert_int_equal(twice.replies[first_answer].u.gates.gates, twice.replies[before].u.gates.gates);
+    }
+    /* the controller stepped once per period: the same answers as the board without resends
+     * (twice's GATES come in pairs: the answer and its repeat) */
+    size_t gi = 0, pairs = 0;
+    for (size_t i = 0; i < once.n_replies; ++i) {
+        if (once.replies[i].type != HIL_MSG_GATES) {
+            continue;
+        }
+        for (int copy = 0; copy < 2; ++copy) {
+            while (twice.replies[gi].type != HIL_MSG_GATES) {
+                ++gi;
+            }
+            assert_int_equal(twice.replies[gi].u.gates.period, once.replies[i].u.gates.period);
+            assert_int_equal(twice.replies[gi].u.gates.gates, once.replies[i].u.gates.gates);
+            ++gi;
+        }
+        ++pairs;
+    }
+    assert_int_equal(pairs, 30);
+    bench_close(&once);
+    bench_close(&twice);
+}
+
 static void byte_at_a_time_same_as_whole(void **state)
 {
     (void)state;
@@ -314,6 +360,7 @@ int main(void)
         cmocka_unit_test(other_version_gets_hello_and_nothing_else),
         cmocka_unit_test(parameter_round_trip_and_statuses),
         cmocka_unit_test(samples_answered_with_gates_and_telemetry),
+        cmocka_unit_test(resent_sample_gets_the_same_answer_without_a_second_step),
         cmocka_unit_test(byte_at_a_time_same_as_whole),
         cmocka_unit_test(small_output_buffer_drains_later),
         cmocka_unit_test(fault_reported_once_then_status),
