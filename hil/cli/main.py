@@ -28,6 +28,9 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--mode", choices=("lockstep", "realtime"), help="clock (default: the plan's, else lockstep)")
     run.add_argument("--out", type=Path, default=Path("out"), help="output directory (default: out)")
     run.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
+    run.add_argument("--profile", metavar="NAME|PATH",
+                     help="run every plan on this bench profile (a name such as paper or "
+                          "paper-hardware, or a YAML path) instead of the plans' own profiles")
     run.add_argument("--modbus", metavar="[HOST:]PORT", help="serve the Modbus control port while running")
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
 

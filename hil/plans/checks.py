@@ -716,24 +716,33 @@ def result_unit(kind: CheckKind, role_units: Mapping[str, str]) -> str | None:
 
 def evaluate_check(spec: "CheckStep", signals: SignalSet, marks: Mapping[str, float],
                    now_s: float | None = None,
-                   results: Mapping[str, CheckResult] | None = None) -> CheckResult:
+                   results: Mapping[str, CheckResult] | None = None,
+                   profile: str | None = None) -> CheckResult:
     """Measures one check over the recorded signals and judges it.
 
     marks: named times the runner recorded (``start`` is 0). now_s: the
     simulated time the check step was reached, the default end of its window
     (default: the end of the recording). results: earlier checks by name, for
-    ``compare``. Never raises for bad data: a check that cannot be computed
-    is an ERROR result whose message names the plan file, line and cause.
+    ``compare``. profile: the label of the profile the plan ran on, which
+    picks the check's ``profile_limits`` entry if it has one. A ``role:
+    finding`` check is measured and recorded with outcome INFO, never judged
+    (its limits, if any, are a claim reported as holding or not). Never
+    raises for bad data: a check that cannot be computed is an ERROR result
+    whose message names the plan file, line and cause.
     """
     kind = CHECK_KINDS[spec.check_kind]
     where = f"{spec.source}:{spec.line}: check '{spec.name}'"
-    unit = spec.limits.unit if spec.limits is not None else (kind.result_unit
+    check_role = getattr(spec, "role", "acceptance")
+    note = getattr(spec, "note", "")
+    spec_limits = spec.limits_for(profile) if hasattr(spec, "limits_for") else spec.limits
+    unit = spec_limits.unit if spec_limits is not None else (kind.result_unit
                                                              if kind.result_unit not in ("signal", "compare") else "1")
     window: tuple[float, float] | None = None
 
     def error(message: str) -> CheckResult:
-        return CheckResult(spec.name, spec.check_kind, Outcome.ERROR, None, unit, spec.limits,
-                           f"{where}: {message}", window, spec.signals, spec.line, plot=spec.plot)
+        return CheckResult(spec.name, spec.check_kind, Outcome.ERROR, None, unit, spec_limits,
+                           f"{where}: {message}", window, spec.signals, spec.line, plot=spec.plot,
+                           role=check_role, note=note)
 
     now = signals.end_s if now_s is None else float(now_s)
     try:
@@ -777,7 +786,19 @@ def evaluate_check(spec: "CheckStep", signals: SignalSet, marks: Mapping[str, fl
     except (CheckError, UnitError, ValueError, ArithmeticError) as exc:
         return error(str(exc))
 
-    limits = spec.limits
+    limits = spec_limits
+    if limits is None and check_role == "finding":
+        details = dict(m.details)
+        details["measured_native"] = m.value
+        details["native_unit"] = m.unit
+        if math.isnan(m.value):
+            return error(m.message or "the measurement is not a number")
+        shown = "inf" if math.isinf(m.value) else f"{m.value:.6g}"
+        u = "" if m.unit == "1" else f" {m.unit}"
+        message = f"finding: measured {shown}{u}" + (f"; {m.message}" if m.message else "")
+        return CheckResult(spec.name, spec.check_kind, Outcome.INFO, m.value, m.unit, None, message,
+                           window, spec.signals, spec.line, details, plot=spec.plot,
+                           role=check_role, note=note)
     if limits is None:
         # Only kinds whose limits are optional get here (envelope: nothing outside the tube).
         limits = Limits(m.unit, high=0.0)
@@ -794,13 +815,23 @@ def evaluate_check(spec: "CheckStep", signals: SignalSet, marks: Mapping[str, fl
     outcome = limits.judge(measured)
     shown = "inf" if math.isinf(measured) else f"{measured:.6g}"
     u = "" if unit == "1" else f" {unit}"
-    verdict = {Outcome.PASS: "within", Outcome.MARGINAL: "within (marginal)",
-               Outcome.FAIL: "outside"}[outcome]
-    message = f"measured {shown}{u}, {verdict} limits {limits.describe()}"
+    if check_role == "finding":
+        holds = outcome is not Outcome.FAIL
+        details["claim_holds"] = holds
+        message = (f"finding: measured {shown}{u}; the claim {limits.describe()} "
+                   f"{'holds' if holds else 'does not hold'}")
+        outcome = Outcome.INFO
+    else:
+        verdict = {Outcome.PASS: "within", Outcome.MARGINAL: "within (marginal)",
+                   Outcome.FAIL: "outside"}[outcome]
+        message = f"measured {shown}{u}, {verdict} limits {limits.describe()}"
+        if check_role == "regression":
+            message += " (regression bound)"
     if m.message:
         message += f"; {m.message}"
     return CheckResult(spec.name, spec.check_kind, outcome, measured, unit, limits, message,
-                       window, spec.signals, spec.line, details, plot=spec.plot)
+                       window, spec.signals, spec.line, details, plot=spec.plot,
+                       role=check_role, note=note)
 
 
 __all__ = ["CheckError", "CheckKind", "ArgSpec", "Role", "Measurement", "CheckContext",

@@ -38,9 +38,64 @@ BOARD_PARAMS: tuple[str, ...] = SETTABLE_PARAMS
 READ_ONLY_BOARD_PARAMS: tuple[str, ...] = READ_ONLY_PARAMS
 
 
-# Named bench profiles (plant_rt's default profile is the paper's); anything
-# else in `profile:` must be a path to a profile file.
+# Named bench profiles (plant_rt's default profile is the paper's): "paper" and
+# "default" are plant_rt/profiles/paper.yaml; any other name NAME is
+# plant_rt/profiles/NAME.yaml when that file exists (e.g. "paper-hardware").
+# Anything else in `profile:` / `profiles:` must be a path to a profile file.
 PROFILE_NAMES = ("paper", "default")
+# A check's role: acceptance (the default: a limit derived from the design, the
+# physics or a requirement before the first run), regression (a bound taken from
+# a measurement: still fails the plan, shown apart in the report, needs a `note`
+# saying where it came from), finding (informs: the value is recorded, outcome
+# INFO, it cannot fail the plan; `limits`, if given, state a claim such as the
+# paper's, reported as holding or not).
+CHECK_ROLES = ("acceptance", "regression", "finding")
+
+
+def profiles_dir() -> Path:
+    import plant_rt.profiles as _profiles
+
+    return Path(_profiles.__file__).resolve().parent
+
+
+def named_profile_names() -> tuple[str, ...]:
+    """Every profile name a plan may use: paper, default, and plant_rt/profiles/*.yaml's stems."""
+    extra = sorted(f.stem for f in profiles_dir().glob("*.yaml") if f.stem not in PROFILE_NAMES)
+    return PROFILE_NAMES + tuple(extra)
+
+
+def named_profile_path(name: str) -> Path | None:
+    """The file of a named profile; None for the default (paper) profile; KeyError if unknown."""
+    if name in PROFILE_NAMES:
+        return None
+    path = profiles_dir() / f"{name}.yaml"
+    if not path.is_file():
+        raise KeyError(name)
+    return path
+
+
+@dataclass(frozen=True)
+class ProfileRef:
+    """One profile a plan runs on: its label (the name, or the path as written) and its file
+    (None: plant_rt's default, the paper's)."""
+
+    label: str
+    path: Path | None = None
+
+
+def resolve_profile(value: str, base_dir: Path) -> ProfileRef:
+    """A profile name or path (relative to base_dir) -> ProfileRef; ValueError with the reason."""
+    if "/" in value or value.endswith((".yaml", ".yml")):
+        path = (base_dir / value).resolve()
+        if not path.is_file():
+            raise ValueError(f"profile file not found: {path}")
+        return ProfileRef(value, path)
+    try:
+        return ProfileRef(value, named_profile_path(value))
+    except KeyError:
+        raise ValueError(f"unknown profile '{value}': expected one of "
+                         f"{', '.join(named_profile_names())} or a path to a profile "
+                         f"file (containing '/' or ending in .yaml)") from None
 SPEED_SOURCES = ("encoder", "conventional", "ekf")
 MODES = ("lockstep", "realtime")
 LINK_PATTERN = r"^(stub|stub-pty|stub-can|qemu|serial:.+|can:.+)$"
@@ -262,10 +317,21 @@ class CheckStep(StepBase):
     limits: Limits | None
     source: str
     plot: bool = True
+    role: str = "acceptance"            # CHECK_ROLES
+    note: str = ""
+    # Limits for named profiles where the physics differs (`profile_limits:`); the
+    # others use `limits`.
+    profile_limits: Mapping[str, Limits] = field(default_factory=lambda: MappingProxyType({}))
 
     @property
     def signals(self) -> tuple[str, ...]:
         return tuple(v for v in self.roles.values() if isinstance(v, str))
+
+    def limits_for(self, profile: str | None) -> Limits | None:
+        """The limits that apply on a profile (its label): its own if the plan gives them."""
+        if profile is not None and profile in self.profile_limits:
+            return self.profile_limits[profile]
+        return self.limits
 
 
 Step = Union[CommandStep, ParamSetStep, LoadStep, DcLinkStep, PlantParamStep, FaultStep,
@@ -297,6 +363,7 @@ class Plan:
     mode: str | None = None
     timeout_s: float | None = None      # wall-clock budget for the whole plan
     plots: tuple[PlotSpec, ...] = ()
+    profiles: tuple[ProfileRef, ...] = ()   # every profile it runs on (`profile` / `profiles`)
 
     @property
     def checks(self) -> tuple[CheckStep, ...]:
@@ -342,6 +409,7 @@ PLAN_SCHEMA = obj({
     "name": NAME,
     "description": {"type": "string"},
     "profile": NAME,
+    "profiles": {"type": "array", "minItems": 1, "uniqueItems": True, "items": NAME},
     "overrides": {"type": "object"},
     "link": {"type": "string", "pattern": LINK_PATTERN},
     "mode": {"enum": list(MODES)},
@@ -380,7 +448,10 @@ LOAD_SCHEMAS: dict[str, dict] = {
                                ["type", "nm_per_rad_s"]),
 }
 
-_CHECK_COMMON = {"name": NAME, "kind": {}, "window": _WINDOW, "limits": _LIMITS, "plot": BOOLEAN}
+_CHECK_COMMON = {"name": NAME, "kind": {}, "window": _WINDOW, "limits": _LIMITS, "plot": BOOLEAN,
+                 "role": {"enum": list(CHECK_ROLES)}, "note": {"type": "string"},
+                 "profile_limits": {"type": "object", "minProperties": 1,
+                                    "additionalProperties": _LIMITS}}
 _ARG_SCHEMAS = {"number": NUMBER, "positive": POSITIVE, "nonneg": NON_NEGATIVE, "integer": POSITIVE_INT,
                 "bool": BOOLEAN, "quantity": _QUANTITY, "check": NAME}
 
@@ -396,8 +467,6 @@ def _check_schema(kind: CheckKind) -> dict:
         props[key] = {"enum": list(spec.choices)} if spec.type == "choice" else _ARG_SCHEMAS[spec.type]
         if spec.required:
             required.append(key)
-    if kind.limits_required:
-        required.append("limits")
     return obj(props, required)
 
 
@@ -456,17 +525,25 @@ def _build(doc: YamlDocument, path: Path) -> Plan:
     if not isinstance(data, dict):
         raise doc.error((), f"a plan is a mapping with at least 'name' and 'steps', got {python_type(data)}")
     v.check(PLAN_SCHEMA, data, ())
-    profile = data.get("profile")
-    profile_path = None
-    if profile is not None and ("/" in profile or profile.endswith((".yaml", ".yml"))):
-        profile_path = (path.parent / profile).resolve()
-        if not profile_path.is_file():
-            raise doc.error(("profile",), f"profile file not found: {profile_path}")
-    elif profile is not None and profile not in PROFILE_NAMES:
-        raise doc.error(("profile",), f"unknown profile '{profile}': expected one of "
-                                      f"{', '.join(PROFILE_NAMES)} or a path to a profile "
-                                      f"file (containing '/' or ending in .yaml)")
-    state = _BuildState(doc, v, str(doc.source))
+    if "profile" in data and "profiles" in data:
+        raise doc.error(("profiles",), "give either profile (one) or profiles (a list), not both")
+    refs: list[ProfileRef] = []
+    if "profiles" in data:
+        for i, value in enumerate(data["profiles"]):
+            try:
+                refs.append(resolve_profile(value, path.parent))
+            except ValueError as exc:
+                raise doc.error(("profiles", i), str(exc)) from None
+    elif data.get("profile") is not None:
+        try:
+            refs.append(resolve_profile(data["profile"], path.parent))
+        except ValueError as exc:
+            raise doc.error(("profile",), str(exc)) from None
+    else:
+        refs.append(ProfileRef("paper", None))
+    profile = data.get("profile", data["profiles"][0] if "profiles" in data else None)
+    profile_path = refs[0].path
+    state = _BuildState(doc, v, str(doc.source), tuple(r.label for r in refs))
     steps = tuple(state.step(raw, i) for i, raw in enumerate(data["steps"]))
     plots = tuple(state.plot(raw, i) for i, raw in enumerate(data.get("plots", [])))
     return Plan(
@@ -475,15 +552,17 @@ def _build(doc: YamlDocument, path: Path) -> Plan:
         overrides=MappingProxyType(dict(data.get("overrides", {}))),
         link=data.get("link"), mode=data.get("mode"),
         timeout_s=None if data.get("timeout_s") is None else float(data["timeout_s"]),
-        plots=plots,
+        plots=plots, profiles=tuple(refs),
     )
 
 
 class _BuildState:
     """Walks the steps in order, so marks and checks are known before they are used."""
 
-    def __init__(self, doc: YamlDocument, v: SchemaChecker, source: str):
+    def __init__(self, doc: YamlDocument, v: SchemaChecker, source: str,
+                 profiles: tuple[str, ...] = ()):
         self.doc, self.v, self.source = doc, v, source
+        self.profiles = profiles
         self.marks: dict[str, int] = {}             # name -> line
         self.checks: dict[str, tuple[int, str | None]] = {}  # name -> (line, measured unit)
 
@@ -629,14 +708,33 @@ class _BuildState:
         measured_unit = result_unit(kind, role_units)
         if kind.name == "compare":
             measured_unit = "1" if args["operation"] == "ratio" else self.checks[args["a"]][1]
+        role = body.get("role", "acceptance")
+        note = str(body.get("note", "")).strip()
+        if role == "regression" and not note:
+            raise self.err(path + ("role",), "a regression check needs a 'note': the measurement "
+                                             "its bound came from and why it is not derived")
+        if kind.limits_required and role != "finding" and "limits" not in body:
+            raise self.err(path, f"'{kind.name}' needs 'limits' (only a role: finding check "
+                                 f"may leave them out)")
         limits = None
         if "limits" in body:
             limits = self.limits(body["limits"], path + ("limits",), measured_unit, kind)
+        per_profile: dict[str, Limits] = {}
+        for label, raw in body.get("profile_limits", {}).items():
+            lpath = path + ("profile_limits", label)
+            if label not in self.profiles:
+                raise self.err(lpath, f"profile '{label}' is not one this plan runs on "
+                                      f"({', '.join(self.profiles)})")
+            per_profile[label] = self.limits(raw, lpath, measured_unit, kind)
+        if per_profile and limits is None:
+            raise self.err(path + ("profile_limits",), "profile_limits refine 'limits': give "
+                                                       "'limits' for the other profiles too")
         self.checks[name] = (common["line"], limits.unit if limits is not None else measured_unit)
         return CheckStep(**common, name=name, check_kind=kind.name,
                          roles=MappingProxyType(roles), args=MappingProxyType(args),
                          window=window, limits=limits, source=self.source,
-                         plot=bool(body.get("plot", True)))
+                         plot=bool(body.get("plot", True)), role=role, note=note,
+                         profile_limits=MappingProxyType(per_profile))
 
     def kind_rules(self, kind: CheckKind, body: dict, args: dict, path: KeyPath) -> None:
         if kind.name == "settling_time" and "band" in body and "band_pct" in body:
@@ -766,6 +864,7 @@ def _opt_float(x: Any) -> float | None:
 
 __all__ = ["Plan", "Step", "StepBase", "CommandStep", "ParamSetStep", "LoadStep", "DcLinkStep",
            "PlantParamStep", "FaultStep", "RunStep", "WaitUntilStep", "MarkStep", "CheckStep",
-           "Window", "PlotSpec", "load_plan", "parse_plan", "plan_files", "looks_like_plan", "BOARD_PARAMS",
+           "Window", "PlotSpec", "ProfileRef", "CHECK_ROLES", "resolve_profile", "named_profile_path",
+           "named_profile_names", "load_plan", "parse_plan", "plan_files", "looks_like_plan", "BOARD_PARAMS",
            "PLANT_PARAMS", "FAULTS", "PROFILE_NAMES", "SPEED_SOURCES", "MODES", "WAIT_COMPARISONS", "LOAD_TYPES",
            "STATISTICS", "ConfigError"]

@@ -54,10 +54,13 @@ class CheckResult:
     line: int | None = None      # the check's line in the plan
     details: dict[str, Any] = field(default_factory=dict)  # secondary values and plot hints
     plot: bool = True            # the plan wants this check's window plotted
+    role: str = "acceptance"     # acceptance | regression | finding (hil.plans.format.CHECK_ROLES)
+    note: str = ""               # the plan's note on the check (where a regression bound came from)
 
     def to_json(self) -> dict:
         return {
             "name": self.name, "kind": self.kind, "outcome": self.outcome.value,
+            "role": self.role, "note": self.note,
             "measured": _num(self.measured), "unit": self.unit,
             "limits": None if self.limits is None else self.limits.to_json(),
             "message": self.message,
@@ -76,7 +79,8 @@ class CheckResult:
                    message=data.get("message", ""),
                    window=None if window is None else (float(window[0]), float(window[1])),
                    signals=tuple(data.get("signals", ())), line=data.get("line"),
-                   details=dict(data.get("details", {})), plot=bool(data.get("plot", True)))
+                   details=dict(data.get("details", {})), plot=bool(data.get("plot", True)),
+                   role=data.get("role", "acceptance"), note=data.get("note", ""))
 
 
 @dataclass(frozen=True)
@@ -119,6 +123,7 @@ class PlanResult:
     description: str = ""
     marks: dict[str, float] = field(default_factory=dict)
     extra: dict[str, Any] = field(default_factory=dict)  # link counters, real-time stats, ...
+    profile: str = ""                 # the bench profile it ran on (a name, or a path as written)
 
     def counts(self) -> dict[str, int]:
         out = {o.value: 0 for o in CHECK_OUTCOMES}
@@ -128,7 +133,8 @@ class PlanResult:
 
     def to_json(self) -> dict:
         return {
-            "plan": self.plan_name, "source": self.source, "outcome": self.outcome.value,
+            "plan": self.plan_name, "profile": self.profile, "source": self.source,
+            "outcome": self.outcome.value,
             "reason": self.reason, "description": self.description,
             "started_at": self.started_at, "ended_at": self.ended_at,
             "sim_duration_s": _num(self.sim_duration_s), "wall_duration_s": _num(self.wall_duration_s),
@@ -152,7 +158,7 @@ class PlanResult:
                    link=data.get("link", ""), mode=data.get("mode", ""),
                    log_path=data.get("log_path"), description=data.get("description", ""),
                    marks={k: float(v) for k, v in data.get("marks", {}).items()},
-                   extra=dict(data.get("extra", {})))
+                   extra=dict(data.get("extra", {})), profile=data.get("profile", ""))
 
 
 def plan_outcome(steps: tuple[StepResult, ...] | list[StepResult],
@@ -183,12 +189,15 @@ def plan_outcome(steps: tuple[StepResult, ...] | list[StepResult],
         return Outcome.TIMEOUT, f"step {s.index + 1} ({s.kind}, line {s.line}): {s.message}"
     failed = [c for c in checks if c.outcome is Outcome.FAIL]
     if failed:
-        names = ", ".join(f"'{c.name}'" for c in failed[:3])
+        names = ", ".join(f"'{c.name}'" + (" (regression)" if c.role == "regression" else "")
+                          for c in failed[:3])
         more = f" and {len(failed) - 3} more" if len(failed) > 3 else ""
         return Outcome.FAIL, f"{len(failed)} check(s) failed: {names}{more}"
     marginal = sum(1 for c in checks if c.outcome is Outcome.MARGINAL)
     passed = sum(1 for c in checks if c.outcome is Outcome.PASS)
+    info = sum(1 for c in checks if c.outcome is Outcome.INFO)
     note = f", {marginal} marginal" if marginal else ""
+    note += f", {info} finding(s) recorded" if info else ""
     return Outcome.PASS, f"{passed + marginal} check(s) passed{note}"
 
 

@@ -1,7 +1,8 @@
 """The outcome of a check, a step or a plan: one word with a meaning, as OpenHTF has it.
 
 Check:  PASS, MARGINAL (passes, close to a limit), FAIL, ERROR (could not be
-        computed), SKIPPED (never reached).
+        computed), SKIPPED (never reached), INFO (a `role: finding` check: the
+        value is recorded and cannot fail the plan).
 Step:   PASS, FAIL, ERROR, TIMEOUT, SKIPPED.
 Plan:   PASS, FAIL, ERROR, TIMEOUT, ABORTED.
 """
@@ -18,16 +19,19 @@ class Outcome(str, Enum):
     TIMEOUT = "TIMEOUT"
     ABORTED = "ABORTED"
     SKIPPED = "SKIPPED"
+    INFO = "INFO"          # a finding's check: measured and recorded, never judged
+
 
     def __str__(self) -> str:
         return self.value
 
     @property
     def passed(self) -> bool:
-        return self in (Outcome.PASS, Outcome.MARGINAL)
+        return self in (Outcome.PASS, Outcome.MARGINAL, Outcome.INFO)
 
 
-CHECK_OUTCOMES = (Outcome.PASS, Outcome.MARGINAL, Outcome.FAIL, Outcome.ERROR, Outcome.SKIPPED)
+CHECK_OUTCOMES = (Outcome.PASS, Outcome.MARGINAL, Outcome.FAIL, Outcome.ERROR, Outcome.SKIPPED,
+                  Outcome.INFO)
 STEP_OUTCOMES = (Outcome.PASS, Outcome.FAIL, Outcome.ERROR, Outcome.TIMEOUT, Outcome.SKIPPED)
 PLAN_OUTCOMES = (Outcome.PASS, Outcome.FAIL, Outcome.ERROR, Outcome.TIMEOUT, Outcome.ABORTED)
 

@@ -37,7 +37,10 @@ from hil.plans.units import compatible, convert, is_angle
 
 MAX_PLOT_POINTS = 4000
 _COLORS = {"PASS": "#1a7f37", "MARGINAL": "#9a6700", "FAIL": "#cf222e", "ERROR": "#8250df",
-           "TIMEOUT": "#bc4c00", "ABORTED": "#57606a", "SKIPPED": "#6e7781"}
+           "TIMEOUT": "#bc4c00", "ABORTED": "#57606a", "SKIPPED": "#6e7781", "INFO": "#0969da"}
+ROLE_TITLES = {"acceptance": "Acceptance checks (limits derived before the first run)",
+               "regression": "Regression bounds (taken from a measurement; they still fail the plan)",
+               "finding": "Findings (measured and recorded; they cannot fail the plan)"}
 
 
 def slug(name: str) -> str:
@@ -60,13 +63,22 @@ def _time(seconds: float) -> str:
     return f"{max(seconds, 0.0):.3f}" if math.isfinite(seconds) else "0.000"
 
 
+def suite_name(result: PlanResult) -> str:
+    """'plan [profile]' (the plan name alone when it ran on no named profile)."""
+    return f"{result.plan_name} [{result.profile}]" if result.profile else result.plan_name
+
+
 def junit_suite(result: PlanResult) -> ET.Element:
-    """One <testsuite> for a plan."""
+    """One <testsuite> for a plan on one profile; a regression or finding check's testcase name
+    says so, and a finding never carries a <failure>."""
     classname = f"hil.{slug(result.plan_name)}"
+    if result.profile:
+        classname += f".{slug(result.profile.replace('/', '-'))}"
     cases: list[ET.Element] = []
     failures = errors = skipped = 0
     for c in result.checks:
-        case = ET.Element("testcase", name=_x(c.name), classname=classname, time="0.000")
+        label = c.name if c.role == "acceptance" else f"{c.name} [{c.role}]"
+        case = ET.Element("testcase", name=_x(label), classname=classname, time="0.000")
         detail = _x(_check_text(c))
         if c.outcome is Outcome.FAIL:
             failures += 1
@@ -87,12 +99,13 @@ def junit_suite(result: PlanResult) -> ET.Element:
                       message=_x(result.reason)).text = _x(
             f"{result.source}: plan '{result.plan_name}' ended {result.outcome.value}: {result.reason}")
         cases.append(case)
-    suite = ET.Element("testsuite", name=_x(result.plan_name), tests=str(len(cases)),
+    suite = ET.Element("testsuite", name=_x(suite_name(result)), tests=str(len(cases)),
                        failures=str(failures), errors=str(errors), skipped=str(skipped),
                        time=_time(result.wall_duration_s), timestamp=_x(result.started_at),
                        hostname=_x(socket.gethostname()), file=_x(result.source))
     props = ET.SubElement(suite, "properties")
     for key, value in (("outcome", result.outcome.value), ("reason", result.reason),
+                       ("profile", result.profile),
                        ("source", result.source), ("link", result.link), ("mode", result.mode),
                        ("sim_duration_s", f"{result.sim_duration_s:.6f}"),
                        ("log", result.log_path or "")):
@@ -122,6 +135,10 @@ def junit_xml(results: Iterable[PlanResult]) -> str:
 
 def _check_text(c: CheckResult) -> str:
     lines = [f"{c.outcome.value}: {c.message}"]
+    if c.role != "acceptance":
+        lines.append(f"role: {c.role}")
+    if c.note:
+        lines.append(f"note: {c.note}")
     if c.window is not None:
         lines.append(f"window: {c.window[0]:.6f} .. {c.window[1]:.6f} s")
     if c.signals:
@@ -395,10 +412,11 @@ def html_report(result: PlanResult, signals: SignalSet, plots: Sequence = ()) ->
     end_s = signals.end_s if len(signals) else result.sim_duration_s
     counts = result.counts()
     parts = [f"<!DOCTYPE html><html lang=\"en\"><head><meta charset=\"utf-8\">"
-             f"<title>{e(result.plan_name)} - {e(result.outcome.value)}</title><style>{_CSS}</style></head><body>",
+             f"<title>{e(suite_name(result))} - {e(result.outcome.value)}</title><style>{_CSS}</style></head><body>",
              f"<h1>{e(result.plan_name)} {_badge(result.outcome.value)}</h1>",
+             f"<p>profile: <b>{e(result.profile or 'paper')}</b></p>",
              f"<p>{e(result.reason)}</p>"]
-    meta = [("source", result.source), ("link / mode", f"{result.link} / {result.mode}"),
+    meta = [("source", result.source), ("profile", result.profile or "-"), ("link / mode", f"{result.link} / {result.mode}"),
             ("simulated time", f"{result.sim_duration_s:.4f} s"),
             ("wall time", f"{result.wall_duration_s:.2f} s"),
             ("started / ended", f"{result.started_at} / {result.ended_at}"),
@@ -409,15 +427,23 @@ def html_report(result: PlanResult, signals: SignalSet, plots: Sequence = ()) ->
     if result.description:
         parts.append(f"<h2>Description</h2><pre>{e(result.description)}</pre>")
 
-    parts.append("<h2>Verdicts</h2><table><tr><th>#</th><th>check</th><th>kind</th>"
-                 "<th>measured</th><th>limits</th><th>outcome</th><th>message</th></tr>")
-    for i, c in enumerate(result.checks, 1):
-        unit = "" if c.unit == "1" else f" {c.unit}"
-        limits = c.limits.describe() if c.limits is not None else "-"
-        parts.append(f"<tr><td>{i}</td><td><a href=\"#check-{i}\">{e(c.name)}</a></td><td>{e(c.kind)}</td>"
-                     f"<td class=\"num\">{e(_fmt(c.measured))}{e(unit)}</td><td>{e(limits)}</td>"
-                     f"<td>{_badge(c.outcome.value)}</td><td>{e(c.message)}</td></tr>")
-    parts.append("</table>")
+    parts.append("<h2>Verdicts</h2>")
+    for role, title in ROLE_TITLES.items():
+        rows = [(i, c) for i, c in enumerate(result.checks, 1) if c.role == role]
+        if not rows:
+            continue
+        claim = "claim" if role == "finding" else "limits"
+        parts.append(f"<h3>{e(title)}</h3><table><tr><th>#</th><th>check</th><th>kind</th>"
+                     f"<th>measured</th><th>{claim}</th><th>outcome</th><th>message</th>"
+                     + ("<th>note</th>" if role != "acceptance" else "") + "</tr>")
+        for i, c in rows:
+            unit = "" if c.unit == "1" else f" {c.unit}"
+            limits = c.limits.describe() if c.limits is not None else "-"
+            parts.append(f"<tr><td>{i}</td><td><a href=\"#check-{i}\">{e(c.name)}</a></td><td>{e(c.kind)}</td>"
+                         f"<td class=\"num\">{e(_fmt(c.measured))}{e(unit)}</td><td>{e(limits)}</td>"
+                         f"<td>{_badge(c.outcome.value)}</td><td>{e(c.message)}</td>"
+                         + (f"<td>{e(c.note)}</td>" if role != "acceptance" else "") + "</tr>")
+        parts.append("</table>")
 
     if plots:
         parts.append("<h2>Figures</h2>")
@@ -491,6 +517,12 @@ def write_summary(entries: Sequence[tuple[PlanResult, Mapping[str, Path]]],
     e = html.escape
     results = [r for r, _ in entries]
     rows = []
+    profiles: list[str] = []
+    for r, _ in entries:
+        if r.profile not in profiles:
+            profiles.append(r.profile)
+    grid: dict[str, dict[str, str]] = {}
+    apart: list[str] = []
     for r, paths in entries:
         counts = r.counts()
         link = paths.get("html")
@@ -503,21 +535,43 @@ def write_summary(entries: Sequence[tuple[PlanResult, Mapping[str, Path]]],
         total = sum(counts.values())
         passed = counts["PASS"] + counts["MARGINAL"]
         name = f'<a href="{e(href)}">{e(r.plan_name)}</a>' if href else e(r.plan_name)
-        rows.append(f"<tr><td>{name}</td><td>{_badge(r.outcome.value)}</td>"
+        total -= counts.get("INFO", 0)
+        rows.append(f"<tr><td>{name}</td><td>{e(r.profile or '-')}</td><td>{_badge(r.outcome.value)}</td>"
                     f"<td class=\"num\">{passed}/{total}</td><td class=\"num\">{counts['MARGINAL']}</td>"
+                    f"<td class=\"num\">{counts.get('INFO', 0)}</td>"
                     f"<td class=\"num\">{r.sim_duration_s:.3f}</td><td class=\"num\">{r.wall_duration_s:.2f}</td>"
                     f"<td>{e(r.reason)}</td></tr>")
+        cell = f"{_badge(r.outcome.value)} {passed}/{total}"
+        grid.setdefault(r.plan_name, {})[r.profile] = (f'<a href="{e(href)}">{cell}</a>' if href else cell)
+        for c in r.checks:
+            if c.role == "acceptance":
+                continue
+            unit = "" if c.unit == "1" else f" {c.unit}"
+            apart.append(f"<tr><td>{e(c.role)}</td><td>{e(r.plan_name)}</td><td>{e(r.profile or '-')}</td>"
+                         f"<td>{e(c.name)}</td><td class=\"num\">{e(_fmt(c.measured))}{e(unit)}</td>"
+                         f"<td>{e(c.limits.describe() if c.limits is not None else '-')}</td>"
+                         f"<td>{_badge(c.outcome.value)}</td><td>{e(c.note)}</td></tr>")
     worst = _worst([r.outcome for r in results])
+    side = ("<h2>Plans by profile</h2><table><tr><th>plan</th>"
+            + "".join(f"<th>{e(p or '-')}</th>" for p in profiles) + "</tr>"
+            + "".join(f"<tr><td>{e(plan)}</td>" + "".join(f"<td>{cells.get(p, '')}</td>" for p in profiles)
+                      + "</tr>" for plan, cells in grid.items()) + "</table>")
+    apart_html = ("" if not apart else
+                  "<h2>Regression bounds and findings</h2><p class=\"muted\">Regression bounds come "
+                  "from a measurement and still fail a plan; findings are recorded and cannot.</p>"
+                  "<table><tr><th>role</th><th>plan</th><th>profile</th><th>check</th><th>measured</th>"
+                  "<th>limits / claim</th><th>outcome</th><th>note</th></tr>" + "".join(apart) + "</table>")
     page = (f"<!DOCTYPE html><html lang=\"en\"><head><meta charset=\"utf-8\"><title>hil-bench run - "
             f"{e(worst)}</title><style>{_CSS}</style></head><body><h1>hil-bench run {_badge(worst)}</h1>"
-            f"<p>{len(results)} plan(s)</p><table><tr><th>plan</th><th>outcome</th><th>checks passed</th>"
-            f"<th>marginal</th><th>simulated (s)</th><th>wall (s)</th><th>reason</th></tr>"
-            + "".join(rows) + "</table></body></html>\n")
+            f"<p>{len(results)} run(s) of {len(grid)} plan(s) on {len(profiles)} profile(s)</p>" + side
+            + "<h2>Runs</h2><table><tr><th>plan</th><th>profile</th><th>outcome</th><th>checks passed</th>"
+            f"<th>marginal</th><th>findings</th><th>simulated (s)</th><th>wall (s)</th><th>reason</th></tr>"
+            + "".join(rows) + "</table>" + apart_html + "</body></html>\n")
     paths = {"html": out / "index.html", "junit": out / "junit.xml", "json": out / "summary.json"}
     paths["html"].write_text(page, encoding="utf-8")
     paths["junit"].write_text(junit_xml(results), encoding="utf-8")
     paths["json"].write_text(json.dumps({"outcome": worst, "plans": [
-        {"plan": r.plan_name, "outcome": r.outcome.value, "reason": r.reason,
+        {"plan": r.plan_name, "profile": r.profile, "outcome": r.outcome.value, "reason": r.reason,
          "reports": {k: str(v) for k, v in p.items()}} for r, p in entries]}, indent=2) + "\n",
         encoding="utf-8")
     return paths

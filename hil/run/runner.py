@@ -27,7 +27,7 @@ from hil.session.board_params import load_bench_profile
 from hil.plans.checks import evaluate_check
 from hil.plans.outcome import CheckResult, Outcome, PlanResult, StepResult, plan_outcome
 from hil.plans.format import (
-    PROFILE_NAMES, CheckStep, CommandStep, DcLinkStep, FaultStep, LoadStep, MarkStep, ParamSetStep,
+    PROFILE_NAMES, CheckStep, ProfileRef, resolve_profile, CommandStep, DcLinkStep, FaultStep, LoadStep, MarkStep, ParamSetStep,
     Plan, PlantParamStep, RunStep, WaitUntilStep, load_plan, plan_files,
 )
 from hil.logs.recorder import SENSOR_FIELDS, TELEMETRY_FIELDS, COMMAND_FIELDS
@@ -51,14 +51,40 @@ def expand_plan_paths(paths: Iterable[str | Path]) -> list[Path]:
     return files
 
 
-def profile_for(plan: Plan):
+def profile_ref(plan: Plan, profile: "str | Path | ProfileRef | None" = None) -> ProfileRef:
+    """The profile a run uses: the given one (a ProfileRef, a name, or a path relative to the
+    working directory), else the plan's first (`profile:` / `profiles:`; default paper)."""
+    if isinstance(profile, ProfileRef):
+        return profile
+    if profile is not None:
+        try:
+            return resolve_profile(str(profile), Path.cwd())
+        except ValueError as exc:
+            raise ConfigError(str(exc), str(plan.source_path)) from None
+    if plan.profiles:
+        return plan.profiles[0]
     if plan.profile_path is not None:
-        return load_bench_profile(plan.profile_path, overrides=dict(plan.overrides) or None)
+        return ProfileRef(plan.profile or str(plan.profile_path), plan.profile_path)
     if plan.profile not in (None, *PROFILE_NAMES):
         raise ConfigError(f"unknown profile '{plan.profile}' (named profiles: "
                           f"{', '.join(PROFILE_NAMES)}, or a path to a YAML file)",
                           str(plan.source_path))
-    return load_bench_profile(None, overrides=dict(plan.overrides) or None)
+    return ProfileRef(plan.profile or "paper", None)
+
+
+def profile_for(plan: Plan, profile: "str | Path | ProfileRef | None" = None):
+    """The bench profile of a run (profile_ref), with the plan's overrides applied."""
+    ref = profile_ref(plan, profile)
+    return load_bench_profile(ref.path, overrides=dict(plan.overrides) or None)
+
+
+def plan_dir_name(plan: Plan, ref: ProfileRef | None = None) -> str:
+    """out/<plan>/ for a plan run on its one profile; out/<plan>/<profile>/ when the plan lists
+    several (or runs on one it does not list), so each profile's reports sit side by side."""
+    labels = [r.label for r in plan.profiles] or ["paper"]
+    if ref is None or (len(labels) == 1 and ref.label == labels[0]):
+        return slug(plan.name)
+    return f"{slug(plan.name)}/{slug(ref.label.replace('/', '-'))}"
 
 
 # --------------------------------------------------------------------------- live signals
@@ -166,6 +192,7 @@ class RunOptions:
     modbus: tuple[str, int] | None = None
     log: bool = True
     reports: bool = True            # False: only the MCAP log goes into out_dir (hil sweep)
+    profile: Any = None             # a name, a path or a ProfileRef; None: the plan's first
 
 
 @dataclass
@@ -178,11 +205,12 @@ class _RunState:
 def run_plan(plan: Plan, link: str | None = None, mode: str | None = None,
              out_dir: Path | None = None, seed: int = 0, progress=None,
              modbus: tuple[str, int] | None = None,
-             reports: bool = True) -> tuple[PlanResult, SignalSet]:
-    """Runs one plan; writes log and (unless reports=False) reports into out_dir when given.
-    Never raises for a failing board or plan: the outcome says what happened."""
+             reports: bool = True, profile=None) -> tuple[PlanResult, SignalSet]:
+    """Runs one plan on one profile (default: the plan's first); writes log and (unless
+    reports=False) reports into out_dir/<plan_dir_name> when given. Never raises for a
+    failing board or plan: the outcome says what happened."""
     opts = RunOptions(link=link, mode=mode, out_dir=out_dir, seed=seed, progress=progress,
-                      modbus=modbus, reports=reports)
+                      modbus=modbus, reports=reports, profile=profile)
     return _run(plan, opts)
 
 
@@ -191,8 +219,9 @@ def _run(plan: Plan, opts: RunOptions) -> tuple[PlanResult, SignalSet]:
     mode = opts.mode or plan.mode or "lockstep"
     plan_dir = None
     log_path = None
+    ref = profile_ref(plan, opts.profile)
     if opts.out_dir is not None:
-        plan_dir = Path(opts.out_dir) / slug(plan.name)
+        plan_dir = Path(opts.out_dir) / plan_dir_name(plan, ref)
         plan_dir.mkdir(parents=True, exist_ok=True)
         log_path = plan_dir / "log.mcap"
     started = _dt.datetime.now(_dt.timezone.utc)
@@ -202,9 +231,10 @@ def _run(plan: Plan, opts: RunOptions) -> tuple[PlanResult, SignalSet]:
     session = None
     port = None
     try:
-        profile = profile_for(plan)
+        profile = profile_for(plan, ref)
         config = SessionConfig(link=link, mode=mode, log_path=log_path, seed=opts.seed,
-                               metadata={"plan": {"name": plan.name, "source": str(plan.source_path)}})
+                               metadata={"plan": {"name": plan.name, "source": str(plan.source_path),
+                                                  "profile": ref.label}})
         session = BenchSession(profile, config)
         stimuli = Stimuli(session)
         session.on_period = stimuli
@@ -241,7 +271,8 @@ def _run(plan: Plan, opts: RunOptions) -> tuple[PlanResult, SignalSet]:
     checks: list[CheckResult] = []
     by_name: dict[str, CheckResult] = {}
     for spec, now_s in state.checks_reached:
-        result = evaluate_check(spec, signals, state.marks, now_s=now_s, results=by_name)
+        result = evaluate_check(spec, signals, state.marks, now_s=now_s, results=by_name,
+                                profile=ref.label)
         checks.append(result)
         by_name[spec.name] = result
     # A check step's outcome is its check's.
@@ -250,6 +281,7 @@ def _run(plan: Plan, opts: RunOptions) -> tuple[PlanResult, SignalSet]:
         match = next((c for c in checks if c.line == s.line and s.kind == "check"), None)
         if match is not None:
             outcome = {Outcome.PASS: Outcome.PASS, Outcome.MARGINAL: Outcome.PASS,
+                       Outcome.INFO: Outcome.PASS,
                        Outcome.FAIL: Outcome.FAIL}.get(match.outcome, Outcome.ERROR)
             s = StepResult(s.index, s.kind, outcome, s.line, s.start_s, s.end_s, match.message)
         steps.append(s)
@@ -275,7 +307,7 @@ def _run(plan: Plan, opts: RunOptions) -> tuple[PlanResult, SignalSet]:
         ended_at=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
         sim_duration_s=sim_end, wall_duration_s=time.monotonic() - wall0, link=link, mode=mode,
         log_path=str(log_path) if log_path is not None else None, description=plan.description,
-        marks=dict(state.marks), extra=extra)
+        marks=dict(state.marks), extra=extra, profile=ref.label)
     if plan_dir is not None and opts.reports:
         write_reports(result, signals, plan_dir, plan=plan)
     return result, signals
@@ -438,21 +470,26 @@ def run_command(args) -> int:
     try:
         if bar is not None:
             bar.start()
-        for plan in plans:
+        wanted = getattr(args, "profile", None)
+        runs = [(plan, ref) for plan in plans
+                for ref in ([profile_ref(plan, str(wanted))] if wanted else
+                            (plan.profiles or [profile_ref(plan)]))]
+        for plan, ref in runs:
             callback = None
             if bar is not None:
-                task = bar.add_task(plan.name, total=plan.min_sim_duration_s())
+                task = bar.add_task(f"{plan.name} [{ref.label}]", total=plan.min_sim_duration_s())
                 callback = lambda done, total, task=task: bar.update(task, completed=done)
             result, _signals = run_plan(plan, link=args.link, mode=args.mode, out_dir=out,
-                                        seed=args.seed, progress=callback, modbus=modbus)
-            plan_dir = out / slug(plan.name)
+                                        seed=args.seed, progress=callback, modbus=modbus,
+                                        profile=ref)
+            plan_dir = out / plan_dir_name(plan, ref)
             entries.append((result, {"dir": plan_dir, "html": plan_dir / "report.html",
                                      "junit": plan_dir / "junit.xml", "json": plan_dir / "result.json",
                                      "log": plan_dir / "log.mcap"}))
             counts = result.counts()
-            print(f"{result.outcome.value:8s} {plan.name}: {result.reason} "
+            print(f"{result.outcome.value:8s} {plan.name} [{ref.label}]: {result.reason} "
                   f"[{counts.get('PASS', 0)} pass, {counts.get('MARGINAL', 0)} marginal, "
-                  f"{counts.get('FAIL', 0)} fail] ({result.sim_duration_s:.3f} s simulated in "
+                  f"{counts.get('FAIL', 0)} fail, {counts.get('INFO', 0)} finding] ({result.sim_duration_s:.3f} s simulated in "
                   f"{result.wall_duration_s:.1f} s)")
             if result.outcome is Outcome.ABORTED:
                 exit_code = 2
