@@ -5,7 +5,8 @@
 The headline figure (`us_per_step`) is one `sample()` plus one `step(gates=...)` with the
 paper's default profile at rated speed, random Table 2 vectors (a DTC board's traffic): the
 median over batches of the mean per batch, timed with perf_counter_ns. The other scenarios
-show what the non-default paths cost (PWM duty input, dead time, all switches off).
+show what the non-default paths cost (PWM duty input, dead time, device drop, all switches
+off), with the ratio of each PWM figure to the gate-word one from the same run (issue 14).
 """
 from __future__ import annotations
 
@@ -74,6 +75,14 @@ def run(quick: bool = False) -> dict:
             sample()
             step(duty=d)
 
+    drop_plant = _plant(inverter={"dead_time_s": 2.0e-6, "device_drop_v": 1.5})
+
+    def duty_dead_time_drop(n):
+        sample, step = drop_plant.sample, drop_plant.step
+        for d in duties[:n]:
+            sample()
+            step(duty=d)
+
     off_plant = _plant()
     off_plant.safe_state()
 
@@ -87,6 +96,9 @@ def run(quick: bool = False) -> dict:
     slow_n = max(200, per_batch // 10)
     us = _median_us(gates_with_sensors, batches, per_batch)
     us_step = _median_us(gates_only, batches, per_batch)
+    us_duty = _median_us(duty, slow_batches, slow_n)
+    us_dead = _median_us(duty_dead_time, slow_batches, slow_n)
+    us_drop = _median_us(duty_dead_time_drop, slow_batches, slow_n)
     figures = {
         "us_per_step": round(us, 3),
         "steps_per_second": round(1e6 / us),
@@ -95,9 +107,13 @@ def run(quick: bool = False) -> dict:
         "us_step_only": round(us_step, 3),
         "us_sensors": round(us - us_step, 3),
         "us_truth": round(_median_us(truth_only, batches, per_batch), 3),
-        "us_per_step_duty": round(_median_us(duty, slow_batches, slow_n), 3),
-        "us_per_step_duty_dead_time_1us": round(_median_us(duty_dead_time, slow_batches,
-                                                           slow_n), 3),
+        "us_per_step_duty": round(us_duty, 3),
+        "us_per_step_duty_dead_time_1us": round(us_dead, 3),
+        "us_per_step_duty_dead_time_2us_drop_1v5": round(us_drop, 3),
+        # Issue 14's aim: each at most 2x the gate-word figure (us_per_step) of this run.
+        "ratio_duty": round(us_duty / us, 2),
+        "ratio_duty_dead_time_1us": round(us_dead / us, 2),
+        "ratio_duty_dead_time_2us_drop_1v5": round(us_drop / us, 2),
         "us_per_step_all_switches_off": round(_median_us(all_off, slow_batches, slow_n), 3),
         "batches": batches,
         "steps_per_batch": per_batch,

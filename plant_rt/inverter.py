@@ -205,6 +205,18 @@ class SwitchTimeline:
             if new.duty is None:
                 return self._stuck([(0.0, T, new.gates)])
             return self._stuck(self._duty_sweep(new.duty))
+        return self.words(self.switch_windows(old, new))
+
+    def words(self, windows: list[list[tuple[float, float]]]) -> list[tuple[float, float, int]]:
+        """The constant-word intervals of switch_windows()' on-intervals (stuck bits applied)."""
+        return self._stuck(self._word_intervals(windows))
+
+    def switch_windows(self, old: Command, new: Command) -> list[list[tuple[float, float]]]:
+        """Per switch (A_H, A_L, B_H, ...) its on-intervals [(a, b), ...] in [0, T), dead time
+        applied, stuck bits not. Advances the dead-time memory: call once per period."""
+        T = self.period_s
+        if new.duty is not None and (self.delay_s == 0.0 or old == new):
+            return self._duty_windows(new.duty)
         delay = min(self.delay_s, T)
         td = self.dead_time_s
         actual: list[list[tuple[float, float]]] = []
@@ -249,7 +261,52 @@ class SwitchTimeline:
                 if a < b:
                     switch_on.append((a, b))
             actual.append(switch_on)
-        return self._stuck(self._word_intervals(actual))
+        return actual
+
+    def _duty_windows(self, duty: tuple[float, float, float]) -> list[list[tuple[float, float]]]:
+        """switch_windows() for a duty command with no delay in play (the common case): the
+        command of switch j is on in one centre window (high side) or around it (low side);
+        turn-on edges come td later, a command that has been on since the last period keeps
+        the rise it had (dead time across the period boundary)."""
+        T = self.period_s
+        td = self.dead_time_s
+        rise = self._rise
+        out: list[list[tuple[float, float]]] = []
+        for x in range(3):
+            d = duty[x]
+            jh, jl = 2 * x, 2 * x + 1
+            if d >= 1.0:
+                r = rise[jh]
+                a = td if r is None else max(r + td, 0.0)
+                out.append([(a, T)] if a < T else [])
+                rise[jh] = (0.0 if r is None else r) - T
+                rise[jl] = None
+                out.append([])
+                continue
+            if d <= 0.0:
+                r = rise[jl]
+                a = td if r is None else max(r + td, 0.0)
+                out.append([])
+                out.append([(a, T)] if a < T else [])
+                rise[jh] = None
+                rise[jl] = (0.0 if r is None else r) - T
+                continue
+            t_on = 0.5 * T * (1.0 - d)
+            t_off = 0.5 * T * (1.0 + d)
+            a = t_on + td
+            out.append([(a, t_off)] if a < t_off else [])
+            rise[jh] = None
+            low = []
+            r = rise[jl]
+            a = td if r is None else max(r + td, 0.0)
+            if a < t_on:
+                low.append((a, t_on))
+            a = t_off + td
+            if a < T:
+                low.append((a, T))
+            rise[jl] = t_off - T
+            out.append(low)
+        return out
 
     def _duty_sweep(self, duty: tuple[float, float, float]) -> list[tuple[float, float, int]]:
         """One centre-aligned period without dead time: legs switch at T (1 -+ d) / 2."""

@@ -18,6 +18,7 @@ Clarke transform as eq. (7): i_alpha = i_a, i_beta = (i_a + 2 i_b)/sqrt(3).
 from __future__ import annotations
 
 from dataclasses import dataclass
+import math
 from math import cos, sin
 
 from configfile.fields import param
@@ -206,3 +207,76 @@ class MotorModel:
             w += h6 * (d1w + 2.0 * (d2w + d3w) + d4w)
             t += h
         return pa, pb, w, th
+
+    def advance_pieces(self, pa: float, pb: float, w: float, th: float, pieces: list,
+                       h_max: float, tl0: float, tl_slope: float, bw: float
+                       ) -> tuple[float, float, float, float, float]:
+        """advance() over consecutive constant-voltage pieces [(h, va, vb, ga, gb), ...] in one
+        call (a PWM period: up to seven), each integrated as it is by its own RK4 steps.
+
+        Also returns int g . i dt over the pieces (g = (ga, gb) per piece, e.g. the DC-link
+        current's phase weights), from eq. (1) exactly as RK4 integrated it:
+        int_piece i dt = (u h - delta psi)/R.
+        """
+        p, r, psim, ild, ilq, ij, _b, kt = self._k
+        t = 0.0
+        q = 0.0
+        spm = self.spm
+        ril = r * ild
+        rk = r * psim * ild
+        kti = kt * psim * ild
+        for length, va, vb, ga, gb in pieces:
+            n = 1 if length <= h_max else max(1, math.ceil(length / h_max - 1e-9))
+            pa0, pb0 = pa, pb
+            if not spm:
+                pa, pb, w, th = self.advance(pa, pb, w, th, va, vb, length / n, n,
+                                             tl0 + tl_slope * t, tl_slope, bw)
+            else:
+                h = length / n
+                h2 = 0.5 * h
+                h6 = h / 6.0
+                for i in range(n):
+                    tl1 = tl0 + tl_slope * (t + i * h)
+                    tl2 = tl1 + tl_slope * h2
+                    tl4 = tl1 + tl_slope * h
+                    e = p * th
+                    c = cos(e)
+                    s = sin(e)
+                    d1a = va - ril * pa + rk * c
+                    d1b = vb - ril * pb + rk * s
+                    d1w = (kti * (c * pb - s * pa) - bw * w - tl1) * ij
+                    xa = pa + h2 * d1a
+                    xb = pb + h2 * d1b
+                    w2 = w + h2 * d1w
+                    e = p * (th + h2 * w)
+                    c = cos(e)
+                    s = sin(e)
+                    d2a = va - ril * xa + rk * c
+                    d2b = vb - ril * xb + rk * s
+                    d2w = (kti * (c * xb - s * xa) - bw * w2 - tl2) * ij
+                    xa = pa + h2 * d2a
+                    xb = pb + h2 * d2b
+                    w3 = w + h2 * d2w
+                    e = p * (th + h2 * w2)
+                    c = cos(e)
+                    s = sin(e)
+                    d3a = va - ril * xa + rk * c
+                    d3b = vb - ril * xb + rk * s
+                    d3w = (kti * (c * xb - s * xa) - bw * w3 - tl2) * ij
+                    xa = pa + h * d3a
+                    xb = pb + h * d3b
+                    w4 = w + h * d3w
+                    e = p * (th + h * w3)
+                    c = cos(e)
+                    s = sin(e)
+                    d4a = va - ril * xa + rk * c
+                    d4b = vb - ril * xb + rk * s
+                    d4w = (kti * (c * xb - s * xa) - bw * w4 - tl4) * ij
+                    pa += h6 * (d1a + 2.0 * (d2a + d3a) + d4a)
+                    pb += h6 * (d1b + 2.0 * (d2b + d3b) + d4b)
+                    th += h6 * (w + 2.0 * (w2 + w3) + w4)
+                    w += h6 * (d1w + 2.0 * (d2w + d3w) + d4w)
+            if ga or gb:
+                q += ga * (va * length - pa + pa0) + gb * (vb * length - pb + pb0)
+            t += length
+        return pa, pb, w, th, q / r

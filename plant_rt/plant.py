@@ -33,7 +33,7 @@ from math import cos, pi, sin
 from plant_rt.circuit import S32, ZERO_CURRENT_A, Network
 from plant_rt.dc_link import DcLink
 from plant_rt.inverter import (
-    GATE_COMMANDS, LEG_BITS, SQRT3, H, L, O, Command, InverterParams, SwitchTimeline,
+    GATE_COMMANDS, LEG_BITS, PHASE_AXES, SQRT3, H, L, O, Command, InverterParams, SwitchTimeline,
     driven_vector, leg_states, shoot_through,
 )
 from plant_rt.load import Load
@@ -56,6 +56,16 @@ _LEG_STATES = tuple(leg_states(g) for g in range(64))
 _UNIT_VECTORS = tuple(None if driven_vector(g, 1.0) is None
                       else driven_vector(g, 1.0) + (leg_states(g),) for g in range(64))
 _DRIVEN_WORDS = tuple((g, unit) for g, unit in enumerate(_UNIT_VECTORS) if unit is not None)
+#: Per 3-bit leg-high pattern h (bit x: leg x at DC+): (u_alpha, u_beta per volt of link, g_alpha,
+#: g_beta), u = 2/3 sum_x V_x e_x (Table 2) and i_dc = g . i_alphabeta.
+_LEG_UNITS = tuple(
+    (((2 * (h & 1)) - (h >> 1 & 1) - (h >> 2 & 1)) / 3.0, ((h >> 1 & 1) - (h >> 2 & 1)) / SQRT3,
+     sum(PHASE_AXES[x][0] for x in range(3) if h >> x & 1),
+     sum(PHASE_AXES[x][1] for x in range(3) if h >> x & 1))
+    for h in range(8))
+#: Gate word of a leg-high pattern (every leg driven: high or low switch).
+_LEG_WORDS = tuple(sum(LEG_BITS[x][0] if h >> x & 1 else LEG_BITS[x][1] for x in range(3))
+                   for h in range(8))
 PHASES = ("a", "b", "c")
 SWITCHES = ("a_high", "a_low", "b_high", "b_low", "c_high", "c_low")
 #: Names a test plan uses for motor constants (hil/faults/catalog.py PLANT_PARAMS) -> MotorParams fields.
@@ -136,6 +146,10 @@ class Plant:
         self._load_until = -math.inf
         self._fast_ok = (self.dc_link.ideal and self.inverter.device_drop_v == 0.0
                          and self._open_phase is None)
+        # Leg-window path (PWM, dead time, device drop): every interval a constant vector as
+        # long as no current that matters changes sign (checked after the period).
+        self._pwm_ok = (self.dc_link.ideal and self._open_phase is None
+                        and not (self._timeline.force_on or self._timeline.force_off))
         # The whole period as one Table 2 vector needs the commanded word to be the real one.
         self._direct = self._fast_ok and not (self._timeline.force_on or self._timeline.force_off)
         self._timeline.dead_time_s = self.inverter.dead_time_s
@@ -237,11 +251,21 @@ class Plant:
     def _general(self, t0: float, old: Command, new: Command) -> None:
         """A period that is not one ideal driven interval: split it and integrate each part."""
         T = self._T
+        tl = self._timeline
+        if self._pwm_ok and not self.load.locked and (
+                new.duty is not None or old.duty is not None or self.inverter.dead_time_s > 0.0
+                or self.inverter.device_drop_v > 0.0):
+            windows = tl.switch_windows(old, new)
+            if self._leg_period(t0, windows):
+                return
+            intervals = tl.words(windows)
+        else:
+            intervals = tl.build(old, new)
         net = self.network
         y = [self._pa, self._pb, self._w, self._th, self._vcap]
         acc = [0.0, 0.0, 0.0]
         fast = self._fast_ok and not self.load.locked
-        for a, b, word in self._timeline.build(old, new):
+        for a, b, word in intervals:
             if _SHOOT_THROUGH[word]:
                 self._flags |= STATUS_GATE_FAULT
             while b - a > 1e-15 * T:
@@ -270,6 +294,157 @@ class Plant:
             self._vdc = net.vdc     # the network's last evaluation is at the period's end
         else:
             self._vdc = self.dc_link.source_v
+
+    def _leg_period(self, t0: float, windows: list[list[tuple[float, float]]]) -> bool:
+        """The period as constant-vector pieces from each leg's switch windows; False (nothing
+        changed) when it cannot be: a shoot-through, a load knot inside the period, or a
+        phase current that matters (a leg with a dead interval, every leg with a device drop)
+        at or crossing zero (or the knee) in the period. The general network then takes it.
+
+        With the sign s_x of every such current fixed, leg x sits at DC+ while its high switch
+        is on (s_x > 0: otherwise the low switch or diode conducts) or while its low switch is
+        off (s_x < 0), and its terminal is that rail minus U_d s_x: a constant voltage vector
+        between the legs' edges, integrated piece by piece with the motor's RK4. The sign is
+        checked from the end state: L i_x(t) = V_x(t) + Y_x(t) with V_x = int u_x dt known
+        (piecewise linear) and Y_x = L i_x - V_x C^1 with |Y''| <= M (bound below), so
+        L i_x(t) >= V_x(t) + chord of Y_x - M T^2/8: checked at every edge, where the
+        piecewise-linear part takes its extreme values."""
+        T = self._T
+        v0, slope, t_next = self._load_segment(t0)
+        if t_next < t0 + T:
+            return False
+        m = self.motor
+        inv = self.inverter
+        ud = inv.device_drop_v
+        y_pa, y_pb, y_w, y_th = self._pa, self._pb, self._w, self._th
+        need = []                       # legs whose current sign matters
+        signs = [0.0, 0.0, 0.0]
+        cur0 = None
+        h0 = 0
+        toggles = []
+        for x in range(3):
+            hi = windows[2 * x]
+            lo = windows[2 * x + 1]
+            on = 0.0
+            for a, b in hi:
+                on += b - a
+                for c, d in lo:
+                    if a < d and c < b:
+                        return False    # shoot-through: the general path trips the leg
+            for c, d in lo:
+                on += d - c
+            if ud > 0.0 or on < T * (1.0 - 1e-12):
+                if not m.spm:
+                    return False        # the sign check below is written for Ld = Lq
+                if cur0 is None:
+                    ia, ib, _, _ = m.currents(y_pa, y_pb, y_th)
+                    cur0 = (ia, -0.5 * ia + S32 * ib, -0.5 * ia - S32 * ib)
+                ix = cur0[x]
+                thr = inv.device_knee_a if ud > 0.0 else 0.0
+                if abs(ix) <= thr + ZERO_CURRENT_A:
+                    return False
+                signs[x] = 1.0 if ix > 0.0 else -1.0
+                need.append(x)
+                if ix < 0.0:            # at DC+ except while the low switch conducts
+                    high, t = [], 0.0
+                    for c, d in lo:
+                        if c > t:
+                            high.append((t, c))
+                        t = d
+                    if t < T:
+                        high.append((t, T))
+                    hi = high
+            bit = 1 << x
+            for a, b in hi:
+                if a <= 0.0:
+                    h0 |= bit
+                else:
+                    toggles.append((a, bit))
+                if b < T:
+                    toggles.append((b, bit))
+        toggles.sort()
+        vdc = self.dc_link.source_v
+        # Device drop: leg x's terminal is its rail - U_d s_x, a constant offset vector.
+        off_a = -ud * (2.0 * signs[0] - signs[1] - signs[2]) / 3.0
+        off_b = -ud * (signs[1] - signs[2]) / SQRT3
+        pieces = []
+        edges = [0.0]
+        t = 0.0
+        h = h0
+        ua_int = ub_int = 0.0
+        for when, bit in toggles:
+            if when > t:
+                unit = _LEG_UNITS[h]
+                va = unit[0] * vdc + off_a
+                vb = unit[1] * vdc + off_b
+                pieces.append((when - t, va, vb, unit[2], unit[3]))
+                ua_int += va * (when - t)
+                ub_int += vb * (when - t)
+                edges.append(when)
+                t = when
+            h ^= bit
+        if t < T:
+            unit = _LEG_UNITS[h]
+            va = unit[0] * vdc + off_a
+            vb = unit[1] * vdc + off_b
+            pieces.append((T - t, va, vb, unit[2], unit[3]))
+            ua_int += va * (T - t)
+            ub_int += vb * (T - t)
+            edges.append(T)
+        if self.load.version != self._load_key:
+            self._refresh_load(t0)
+        pa, pb, w, th, q = m.advance_pieces(y_pa, y_pb, y_w, y_th, pieces, self._h_max, v0,
+                                            slope, self._bw)
+        if need and not self._signs_hold(need, signs, cur0, pieces, edges, pa, pb, w, th,
+                                         y_w, ud, vdc, abs(v0) + abs(slope) * T):
+            return False
+        self._pa, self._pb, self._w = pa, pb, w
+        self._th = th
+        self._u_int = (ua_int, ub_int)
+        self._idc_int = q
+        self._zero_current = False
+        self._vdc = vdc
+        if self._net_dirty:
+            self.network.set_driven(_LEG_STATES[_LEG_WORDS[h]])
+            self._net_dirty = False
+        return True
+
+    def _signs_hold(self, need, signs, cur0, pieces, edges, pa, pb, w, th, w0, ud, vdc,
+                    load_max) -> bool:
+        """No current in `need` reached zero (or the knee) within the period (see _leg_period)."""
+        m = self.motor
+        T = self._T
+        ia, ib, _, _ = m.currents(pa, pb, th)
+        cur1 = (ia, -0.5 * ia + S32 * ib, -0.5 * ia - S32 * ib)
+        lind = m.ld
+        # |Y''| <= (R/L)(|u| + R i_max + w_e psi_m) + (w_e^2 + |alpha_e|) psi_m over the period.
+        u_max = 2.0 / 3.0 * (vdc + 2.0 * ud)
+        w_max = max(abs(w0), abs(w))
+        i_max = max(math.hypot(*m.currents(self._pa, self._pb, self._th)[:2]), math.hypot(ia, ib))
+        i_max += T * (u_max + m.p * w_max * m.psim) / lind + 1e-3
+        alpha_e = m.p * (m.kt * m.psim * i_max + self._bw * w_max + load_max) * m.ij
+        we = m.p * w_max + alpha_e * T
+        bound = (m.r / lind * (u_max + m.r * i_max + we * m.psim)
+                 + (we * we + alpha_e) * m.psim) * T * T / 8.0
+        thr = lind * (self.inverter.device_knee_a if ud > 0.0 else 0.0) + bound
+        for x in need:
+            ex0, ex1 = PHASE_AXES[x]
+            s = signs[x]
+            vx = 0.0
+            vx_end = 0.0
+            for length, va, vb, _, _ in pieces:
+                vx_end += (ex0 * va + ex1 * vb) * length
+            y0 = lind * cur0[x]
+            dy = lind * cur1[x] - vx_end - y0
+            k = 0
+            for length, va, vb, _, _ in pieces:
+                if s * (vx + y0 + dy * edges[k] / T) <= thr:
+                    return False
+                vx += (ex0 * va + ex1 * vb) * length
+                k += 1
+            if s * lind * cur1[x] <= thr:
+                return False
+        return True
 
     def _advance(self, y: list[float], vec: tuple, length: float, v0: float, slope: float,
                  acc: list[float]) -> None:
