@@ -26,10 +26,25 @@ class FakeBoard:
     """
 
     def __init__(self, proto_version: int = PROTOCOL_VERSION, answer_hello: bool = True,
-                 die_after_samples: int | None = None):
+                 die_after_samples: int | None = None, role: int = int(Role.CONTROLLER),
+                 capabilities: int = 1, control_period_ns: int | None = None,
+                 clamp: dict[int, float] | None = None, hello_raw: bytes | None = None,
+                 on_sample=None, hello_after_tries: int = 1):
+        """role, capabilities, control_period_ns (None: echo the bench's): its HELLO.
+        clamp: parameter id -> the value it answers PARAM_SET with (status OK).
+        hello_raw: bytes sent instead of a HELLO answer (garbage, frames of another version).
+        on_sample(sample, encoder) -> bytes: what it writes for a SAMPLE (default GATES 0).
+        hello_after_tries: answers only the n-th HELLO (1: the first)."""
         self.proto_version = proto_version
         self.answer_hello = answer_hello
         self.die_after_samples = die_after_samples
+        self.role, self.capabilities = role, capabilities
+        self.control_period_ns = control_period_ns
+        self.clamp = clamp or {}
+        self.hello_raw = hello_raw
+        self.on_sample = on_sample
+        self.hello_after_tries = hello_after_tries
+        self.hellos = 0
         self.master, slave = os.openpty()
         tty.setraw(slave, termios.TCSANOW)
         self.slave_path = os.ttyname(slave)
@@ -72,15 +87,23 @@ class FakeBoard:
                 return
             for msg in dec.feed(data):
                 self.received.append(msg)
-                if isinstance(msg, Hello) and self.answer_hello:
+                if isinstance(msg, Hello):
+                    self.hellos += 1
+                    if not self.answer_hello or self.hellos < self.hello_after_tries:
+                        continue
+                    if self.hello_raw is not None:
+                        os.write(self.master, self.hello_raw)
+                        continue
                     name = b"fake-board"
-                    self._write(enc, Hello(proto_version=self.proto_version,
-                                           role=int(Role.CONTROLLER), capabilities=1,
-                                           control_period_ns=msg.control_period_ns,
+                    period = msg.control_period_ns if self.control_period_ns is None \
+                        else self.control_period_ns
+                    self._write(enc, Hello(proto_version=self.proto_version, role=self.role,
+                                           capabilities=self.capabilities,
+                                           control_period_ns=period,
                                            name_len=len(name), name=name))
                 elif isinstance(msg, ParamSet):
-                    self.params[msg.id] = msg.value
-                    self._write(enc, ParamValue(id=msg.id, status=0, value=msg.value))
+                    self.params[msg.id] = self.clamp.get(msg.id, msg.value)
+                    self._write(enc, ParamValue(id=msg.id, status=0, value=self.params[msg.id]))
                 elif isinstance(msg, ParamGet):
                     self._write(enc, ParamValue(id=msg.id, status=0, value=self.params.get(msg.id, 0.0)))
                 elif isinstance(msg, Sample):
@@ -89,6 +112,11 @@ class FakeBoard:
                         self.master = -1
                         return
                     self.samples += 1
-                    self._write(enc, Gates(period=msg.period, gates=0))
+                    if self.on_sample is not None:
+                        data = self.on_sample(msg, enc)
+                        if data:
+                            os.write(self.master, data)
+                    else:
+                        self._write(enc, Gates(period=msg.period, gates=0))
                 elif isinstance(msg, Shutdown):
                     return
