@@ -463,3 +463,36 @@ def test_reader_takes_files_of_other_writers(tmp_path):
     assert list(note["k"]) == list(range(0, 100, 10)) and note["deep.x"][1] == [10]
     windowed = read_log(path, ["/status"], t0=500e-9, t1=600e-9)["/status"]
     assert list(windowed["count"]) == [-50, -51, -52, -53, -54, -55, -56, -57, -58, -59, -60]
+
+
+def test_write_many_gives_the_same_file_as_one_write_per_message(tmp_path):
+    """The batched path (numpy columns into the chunk) writes the very bytes write() does,
+    across chunk boundaries, in batches of any size."""
+    n = 1000
+    values = np.column_stack([np.arange(n), np.arange(n) * 0.5, np.arange(n) * 0.25])
+    times = np.arange(n) * 50_000
+    files = []
+    for mode in ("one", "many"):
+        path = tmp_path / f"{mode}.mcap"
+        log = McapLog(path, chunk_size=4096)
+        ch = log.add_fixed_channel("/a", "hil.A", [("k", "fixed32"), ("x", "double"), ("y", "float")])
+        if mode == "one":
+            for i in range(n):
+                ch.write(int(times[i]), int(values[i, 0]), values[i, 1], values[i, 2])
+        else:
+            for a in range(0, n, 137):
+                ch.write_many(times[a:a + 137], values[a:a + 137])
+        log.close()
+        files.append(path.read_bytes())
+    assert files[0] == files[1]
+    assert read_log(tmp_path / "many.mcap")["/a"]["x"].tolist() == (np.arange(n) * 0.5).tolist()
+
+
+def test_write_many_refuses_values_that_do_not_fit(tmp_path):
+    log = McapLog(tmp_path / "bad.mcap")
+    ch = log.add_fixed_channel("/s", "hil.S", [("k", "fixed32"), ("x", "double")])
+    with pytest.raises(ValueError, match="/s: a value does not fit"):
+        ch.write_many([0, 1], [[1, 0.0], [-1, 0.0]])          # fixed32 cannot hold -1
+    with pytest.raises(ValueError, match="/s: expected 2 rows of 2 values"):
+        ch.write_many([0, 1], [[1, 0.0, 3.0], [2, 0.0, 3.0]])
+    log.close()

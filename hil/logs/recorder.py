@@ -1,7 +1,12 @@
 """Keeps every period's plant truth, sensor values, telemetry and commands.
 
 In memory as plain lists (an append costs tens of nanoseconds) for the
-checks at the end of a run, and in the MCAP log as it happens. Signals are
+checks at the end of a run, and in the MCAP log in batches: every
+`LOG_BATCH_PERIODS` periods the new rows go to the log at once
+(`FixedChannel.write_many`, numpy columns into the open chunk), about ten times
+cheaper than one packed message per row. The log's crash bound grows by the
+batch: a SIGKILL loses the open chunk and at most the last 256 periods
+(12.8 ms at 50 us); flush() and close() write the batch first. Signals are
 aligned on the sample instant t_k = k * T: the plant truth recorded for period
 k is the state the sensors sampled, and the telemetry of period k is what the
 board computed from that sample.
@@ -11,6 +16,9 @@ from __future__ import annotations
 import numpy as np
 
 from plant_rt import TRUTH_FIELDS
+
+#: Periods between two batched writes of the full-rate channels to the log.
+LOG_BATCH_PERIODS = 256
 
 SENSOR_FIELDS = ("adc_i1", "adc_i2", "adc_vdc", "encoder", "status")
 TELEMETRY_FIELDS = ("sector", "speed_source", "state", "gates", "speed_feedback_rad_s",
@@ -22,6 +30,11 @@ COMMAND_FIELDS = ("enable", "speed_source", "speed_ref_rpm", "torque_mode", "tor
 #: Step signals every run has (0 until they change): the board's latched fault code (FAULT,
 #: STATUS) and the Modbus bits of the injected faults in effect (hil/faults/injector.py).
 STEP_SIGNALS = ("ctrl.fault_code", "fault.active_bits")
+
+
+def _log_times(periods, period_s: float) -> np.ndarray:
+    """k -> round(k T 1e9) ns, rounding half to even like Python's round()."""
+    return np.rint(np.asarray(periods, dtype=np.float64) * period_s * 1e9).astype(np.uint64)
 
 
 def unit_of(field: str) -> str:
@@ -55,6 +68,8 @@ class Recorder:
         self._log = None
         self._truth_ch = self._sensor_ch = self._telemetry_ch = None
         self._frames_ch = None
+        self._logged_periods = 0        # rows of periods/truth/sensors already in the log
+        self._logged_telemetry = 0
 
     def attach_log(self, log) -> None:
         self._log = log
@@ -68,26 +83,46 @@ class Recorder:
             "/ctrl/telemetry", "hil.Telemetry",
             [("period", "fixed32")] + [(f, "fixed32" if i < 4 else "float")
                                        for i, f in enumerate(TELEMETRY_FIELDS)])
+        self._logged_periods = len(self.periods)
+        self._logged_telemetry = len(self.telemetry_rows)
+        log.before_flush(self.flush_log)
 
     def period(self, k: int, truth: tuple, sample) -> None:
-        self.periods.append(k)
+        periods = self.periods
+        periods.append(k)
         self.truth_rows.append(truth)
-        row = (sample.adc_i1, sample.adc_i2, sample.adc_vdc, sample.encoder, sample.status)
-        self.sensor_rows.append(row)
-        if self._log is not None:
-            t_ns = round(k * self.period_s * 1e9)
-            self._truth_ch.write(t_ns, *truth)
-            self._sensor_ch.write(t_ns, k, *row)
+        self.sensor_rows.append((sample.adc_i1, sample.adc_i2, sample.adc_vdc, sample.encoder,
+                                 sample.status))
+        if self._log is not None and len(periods) - self._logged_periods >= LOG_BATCH_PERIODS:
+            self.flush_log()
 
     def telemetry(self, msg) -> None:
-        row = (msg.period, msg.sector, msg.speed_source, msg.state, msg.gates,
-               msg.speed_feedback_rad_s, msg.speed_encoder_rad_s, msg.speed_raw_rad_s,
-               msg.speed_lpf_rad_s, msg.speed_ekf_rad_s, msg.flux_angle_rad, msg.ekf_angle_rad,
-               msg.flux_mag_wb, msg.torque_est_nm, msg.torque_ref_nm, msg.rotor_pos_conv_rad,
-               msg.rotor_pos_ekf_rad)
-        self.telemetry_rows.append(row)
-        if self._log is not None:
-            self._telemetry_ch.write(round(msg.period * self.period_s * 1e9), *row)
+        self.telemetry_rows.append(
+            (msg.period, msg.sector, msg.speed_source, msg.state, msg.gates,
+             msg.speed_feedback_rad_s, msg.speed_encoder_rad_s, msg.speed_raw_rad_s,
+             msg.speed_lpf_rad_s, msg.speed_ekf_rad_s, msg.flux_angle_rad, msg.ekf_angle_rad,
+             msg.flux_mag_wb, msg.torque_est_nm, msg.torque_ref_nm, msg.rotor_pos_conv_rad,
+             msg.rotor_pos_ekf_rad))
+
+    def flush_log(self) -> None:
+        """Writes the rows not yet in the log (every LOG_BATCH_PERIODS periods, and before
+        the log flushes or closes)."""
+        if self._log is None:
+            return
+        a, b = self._logged_periods, len(self.periods)
+        if b > a:
+            t_ns = _log_times(self.periods[a:b], self.period_s)
+            self._truth_ch.write_many(t_ns, np.asarray(self.truth_rows[a:b], dtype=np.float64))
+            sensors = np.empty((b - a, 1 + len(SENSOR_FIELDS)), dtype=np.float64)
+            sensors[:, 0] = self.periods[a:b]
+            sensors[:, 1:] = self.sensor_rows[a:b]
+            self._sensor_ch.write_many(t_ns, sensors)
+            self._logged_periods = b
+        a, b = self._logged_telemetry, len(self.telemetry_rows)
+        if b > a:
+            rows = np.asarray(self.telemetry_rows[a:b], dtype=np.float64)
+            self._telemetry_ch.write_many(_log_times(rows[:, 0], self.period_s), rows)
+            self._logged_telemetry = b
 
     def command(self, k: int, row: tuple) -> None:
         self.command_rows.append((k, *row))
