@@ -79,7 +79,7 @@ def load_firmware_library(path: str | Path) -> ctypes.CDLL:
     return lib
 
 
-class FirmwareLibraryLink(Link):
+class _FirmwareLibrary(Link):
     """A Link whose far end is a firmware library in this process (serial or CAN transport)."""
 
     def __init__(self, path: str | Path, transport: str = "serial", url: str | None = None) -> None:
@@ -121,9 +121,9 @@ class FirmwareLibraryLink(Link):
         if self.transport == "can":
             self._send_can(msg)
             return
-        self.send_bytes(self._encoder.encode(msg))
+        self._send_bytes(self._encoder.encode(msg))
 
-    def send_bytes(self, data: bytes) -> None:
+    def _send_bytes(self, data: bytes) -> None:
         """Feeds raw bytes to the firmware (fault injection sends damaged frames this way)."""
         self._check_open()
         if self.transport == "can":
@@ -148,7 +148,7 @@ class FirmwareLibraryLink(Link):
             raise LinkError(f"{self.url}: link is closed")
         return inbox.popleft() if inbox else None
 
-    def read_bytes(self, timeout_s: float | None = 0.0) -> bytes:
+    def _read_bytes(self, timeout_s: float | None = 0.0) -> bytes:
         """The firmware's answers as raw bytes, bypassing the decoder (link taps)."""
         self._check_open()
         data = bytes(self._raw)
@@ -205,3 +205,24 @@ class FirmwareLibraryLink(Link):
             self._closed = True
             self._lib.hil_fw_destroy(self._fw)
             self._fw = None
+
+
+class FirmwareLibraryLink(_FirmwareLibrary):
+    """The serial transport: also raw bytes in and out, so a link tap (raw-frame log, link
+    faults) can sit in front of it."""
+
+    send_bytes = _FirmwareLibrary._send_bytes
+    read_bytes = _FirmwareLibrary._read_bytes
+
+
+class FirmwareLibraryCanLink(_FirmwareLibrary):
+    """The CAN transport (hil_fw_can_exchange): frames, not bytes; not tapped."""
+
+    def __init__(self, path: str | Path, url: str | None = None) -> None:
+        super().__init__(path, transport="can", url=url)
+
+
+def open_firmware_library(path: str | Path, transport: str = "serial", url: str | None = None):
+    if transport == "can":
+        return FirmwareLibraryCanLink(path, url=url)
+    return FirmwareLibraryLink(path, transport=transport, url=url)

@@ -205,10 +205,10 @@ def spawn_on_pty(spec: str, argv: list[str], transport: str = "serial") -> Board
 
 
 def _lib_link(rest: str, spec: str) -> BoardConnection:
-    from hil.links.firmware_library import FirmwareLibraryLink
+    from hil.links.firmware_library import open_firmware_library
 
     target, options = _query(spec, rest, ("transport",))
-    link = FirmwareLibraryLink(target, transport=options.get("transport", "serial"), url=spec)
+    link = open_firmware_library(target, transport=options.get("transport", "serial"), url=spec)
     # In-process: the firmware answers within the call, so every wait is 0 (SPEC 2.8).
     return BoardConnection(spec, link, hello_wait_s=0.0, answer_wait_min_s=0.0)
 

@@ -175,6 +175,17 @@ class BenchSession:
             self.error = str(exc)
             self._event("refused", {"reason": str(exc)})
             raise
+        except OSError as exc:              # LinkError: the line failed during the handshake
+            self.plant.safe_state()
+            if self.conn.process is not None and self.conn.board_alive():
+                try:    # a process that closed its line is usually exiting: let its status arrive
+                    self.conn.process.wait(0.5)
+                except Exception:  # noqa: BLE001
+                    pass
+            self.error = self._with_report(f"{self._where()}: link failed before the first "
+                                           f"SAMPLE: {exc}")
+            self._event("link_failed", {"reason": self.error})
+            raise SessionError(self.error) from exc
         self.send_command()
 
     def _apply_link_waits(self) -> None:
