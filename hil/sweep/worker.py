@@ -7,6 +7,7 @@ worker itself, which the executor retries.
 """
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import shutil
@@ -45,8 +46,10 @@ def run_one(task: dict) -> dict:
                    wall_s=time.monotonic() - t0)
         return row
     run_dir = Path(task["out_dir"]) / f"{task['index']:06d}" if task.get("out_dir") else None
-    result, _signals = run_plan(plan, link=task["link"], out_dir=run_dir, seed=task["seed"],
-                                reports=False)
+    # The session's warnings (board FAULTs) go to stderr; in a sweep the row carries them.
+    with open(os.devnull, "w") as quiet, contextlib.redirect_stderr(quiet):
+        result, _signals = run_plan(plan, link=task["link"], out_dir=run_dir, seed=task["seed"],
+                                    reports=False)
     passed = result.outcome.passed
     log = result.log_path
     keep = (task["keep_failed"] if not passed else task["keep_passing"])
