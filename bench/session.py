@@ -42,6 +42,57 @@ def lockstep_rate(link: str, log: bool, periods: int, batches: int,
             "cpu_dma_latency": hold}
 
 
+def plant_only_rate(periods: int, batches: int) -> dict:
+    """The plant alone, as the session drives it (sample, step, truth per period), replaying
+    the switch words the stub chose in a 3000 rpm EKF run: the floor under any lockstep rate."""
+    from plant_rt import Plant
+
+    profile = load_profile()
+    with BenchSession(profile, SessionConfig(link="stub")) as session:
+        session.send_command(enable=True, speed_source="ekf", speed_ref_rpm=3000)
+        session.run_periods(periods)
+        gates = [int(row[4]) for row in session.recorder.telemetry_rows[-periods:]]
+    plant = Plant(profile, seed=0)
+    rates = []
+    for _ in range(batches):
+        sample, step, truth = plant.sample, plant.step, plant.truth
+        t0 = time.perf_counter()
+        for g in gates:
+            sample()
+            truth()
+            step(g)
+        rates.append(len(gates) / (time.perf_counter() - t0))
+    rate = statistics.median(rates)
+    return {"periods_per_s": round(rate), "us_per_period": round(1e6 / rate, 2)}
+
+
+def hil_run_startup(runs: int) -> dict:
+    """Wall time of `hil run` on a two-period plan (the shortest a check can read: process
+    start, imports, stub load, handshake, the periods, reports), median of `runs`."""
+    import subprocess
+    import sys
+
+    plan = ("name: two-periods\nsteps:\n  - run: {duration_s: 100.0e-6}\n"
+            "  - check: {name: ran, kind: final_value, signal: plant.speed_rpm, "
+            "limits: {low: -1, high: 1, unit: rpm}}\n")
+    times = []
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "one.yaml"
+        path.write_text(plan)
+        for i in range(runs + 1):
+            t0 = time.perf_counter()
+            hil = Path(sys.executable).with_name("hil")     # the console script users run
+            proc = subprocess.run([str(hil), "run", str(path),
+                                   "--out", str(Path(tmp) / f"out{i}"), "--no-progress"],
+                                  capture_output=True, text=True)
+            if i:                                   # the first run warms the page cache
+                times.append(time.perf_counter() - t0)
+            if proc.returncode not in (0, 1):
+                return {"error": proc.stderr[-500:]}
+    return {"median_s": round(statistics.median(times), 3), "runs": runs,
+            "min_s": round(min(times), 3), "max_s": round(max(times), 3)}
+
+
 def stub_pty_vs_bare(hold_cpu_latency: bool, periods: int, batches: int) -> dict:
     """stub-pty lockstep periods against raw round trips of the C echo over another pty.
 
@@ -104,6 +155,12 @@ def run(quick: bool = False) -> dict:
                                                      batches)
             except Exception as exc:  # noqa: BLE001 - a missing back end is reported, not fatal
                 out["lockstep"][key] = {"error": str(exc)}
+    # The floor: the plant alone, and how far the logged in-process session is above it.
+    out["lockstep"]["plant_only"] = plant_only_rate(periods, batches)
+    if "periods_per_s" in out["lockstep"].get("stub+log", {}):
+        out["lockstep"]["stub+log_vs_plant_only"] = round(
+            out["lockstep"]["plant_only"]["periods_per_s"] / out["lockstep"]["stub+log"]["periods_per_s"], 2)
+    out["hil_run_startup"] = hil_run_startup(3 if quick else 7)
     # TELEMETRY is 8 classic CAN frames, each read a byte at a time by python-can's slcan:
     # the rate a CAN profile gets with telemetry_divider 10 in its controller section.
     try:
