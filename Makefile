@@ -13,6 +13,7 @@ run: bootstrap
 test: bootstrap
 	$(MAKE) -s -C protocol/c test
 	$(MAKE) -s -C firmware_stub test
+	$(MAKE) -s -C examples/sixstep test
 	.venv/bin/python -m pytest -q
 
 clean:
