@@ -107,7 +107,7 @@ class DaskExecutor:
         from distributed.client import FutureCancelledError
 
         try:
-            client = Client(self.address, timeout=self.connect_timeout_s, set_as_default=False)
+            client = Client(self.address, timeout=self.connect_timeout_s)  # distributed.wait needs the default client
         except OSError as exc:
             raise RuntimeError(f"cannot reach the Dask scheduler at {self.address}: {exc}") from None
         token = uuid.uuid4().hex[:8]
