@@ -97,7 +97,9 @@ class ParamId(IntEnum):
     CONTROL_LAW = 60  # 0: DTC (answers GATES), 1: FOC (answers DUTY)
     CURRENT_BANDWIDTH_HZ = 61  # FOC d-q current loop bandwidth
     FOC_ANGLE_SOURCE = 62  # FOC rotor angle: 0 encoder, 1 EKF
-    DEAD_TIME_COMP_S = 63  # FOC dead-time compensation by current sign, 0 = off
+    DEAD_TIME_COMP_S = 63  # dead-time compensation by current sign (FOC duties, DTC observer), 0 = off
+    DEVICE_DROP_COMP_V = 64  # DTC: device drop compensated in the observer voltage, 0 = off
+    DELAY_COMP_PERIODS = 65  # DTC: 1 = answers act one period late (integrate what acted, predict)
 
 
 # HELLO capability bits

@@ -51,6 +51,8 @@ void ctl_params_default(ctl_params *p)
     p->current_bandwidth_hz = CTL_DEFAULT_CURRENT_BANDWIDTH_HZ;
     p->foc_angle_source = CTL_DEFAULT_FOC_ANGLE_SOURCE;
     p->dead_time_comp_s = CTL_DEFAULT_DEAD_TIME_COMP_S;
+    p->device_drop_comp_v = CTL_DEFAULT_DEVICE_DROP_COMP_V;
+    p->delay_comp_periods = CTL_DEFAULT_DELAY_COMP_PERIODS;
 }
 
 void ctl_derive(ctl *c)
@@ -118,6 +120,14 @@ void ctl_derive(ctl *c)
     k->foc.control_period_s = t;
     foc_derive(&k->foc);
     k->control_law = p->control_law;
+    /* DTC: the same dead time and a device drop, compensated in the observer */
+    k->inv.dead_time_s = p->dead_time_comp_s;
+    k->inv.device_drop_v = p->device_drop_comp_v;
+    k->inv.control_period_s = t;
+    k->inv.sign_band_a = CTL_DESIGN_DEAD_TIME_COMP_BAND_A;
+    invcomp_derive(&k->inv);
+    k->inv_comp_on = (p->dead_time_comp_s > 0.0f || p->device_drop_comp_v > 0.0f) ? 1u : 0u;
+    k->delay_comp = p->delay_comp_periods;
     k->foc_angle_source = p->foc_angle_source;
 
     k->vdc_v_per_count = p->vdc_v_per_count;
@@ -234,6 +244,22 @@ static void foc_law(ctl *c, const clarke_out *i, float torque_est, float flux_ma
     st->answer_duty = 1u;
 }
 
+/* High-side states of vector 0..6 (bit 0 phase a, bit 1 b, bit 2 c; vsi.h),
+ * INVCOMP_LEGS_OFF for 0, all switches off. */
+static const uint8_t legs_of_vector[7] = {INVCOMP_LEGS_OFF, 1u, 3u, 2u, 6u, 4u, 5u};
+
+/* Stator voltage of `applied` held after `before`, with the inverter's error
+ * added when compensation is on (flux_observer.h). */
+static void dtc_voltage(const ctl_cfg *k, uint8_t before, uint8_t applied, float vdc_v, float i_edge_a,
+                        float i_edge_b, float i_mean_a, float i_mean_b, float *ua, float *ub)
+{
+    vsi_voltage_of_vector(applied, vdc_v, ua, ub); /* Table 2 */
+    if (k->inv_comp_on) {
+        invcomp_correct(&k->inv, legs_of_vector[before], legs_of_vector[applied], vdc_v, i_edge_a, i_edge_b,
+                        i_mean_a, i_mean_b, ua, ub);
+    }
+}
+
 static float clamp_abs(float v, float lim) { return v > lim ? lim : (v < -lim ? -lim : v); }
 
 uint8_t ctl_step(ctl *c, const hil_sample *s, hil_telemetry *tm)
@@ -260,7 +286,14 @@ uint8_t ctl_step(ctl *c, const hil_sample *s, hil_telemetry *tm)
             ua = st->foc.u_alpha_v; /* the average voltage the SVPWM applied */
             ub = st->foc.u_beta_v;
         } else {
-            vsi_voltage_of_vector(st->vector_prev, vdc_v, &ua, &ub);
+            /* with one period of delay the answer to SAMPLE k-2 acted over [t_k-1, t_k] */
+            uint8_t applied = k->delay_comp ? st->vector_prev2 : st->vector_prev;
+            uint8_t before = k->delay_comp ? st->vector_prev3 : st->vector_prev2;
+            /* the switching edge is at t_k-1 (the previous sample's current); the drop
+             * follows the period's mean current (trapezoid, as the R i term) */
+            dtc_voltage(k, before, applied, vdc_v, st->flux.i_alpha_prev_a, st->flux.i_beta_prev_a,
+                        0.5f * (st->flux.i_alpha_prev_a + i.i_alpha_a), 0.5f * (st->flux.i_beta_prev_a + i.i_beta_a),
+                        &ua, &ub);
         }
         fluxobs_step(&k->flux, &st->flux, ua, ub, i.i_alpha_a, i.i_beta_a);
     } else {
@@ -304,12 +337,26 @@ uint8_t ctl_step(ctl *c, const hil_sample *s, hil_telemetry *tm)
             if (k->control_law == CTL_LAW_FOC) {
                 foc_law(c, &i, torque, mag, vdc_v, torque_ref, feedback);
             } else {
-                uint8_t flux_up = hyst_step(&k->flux_hyst, &st->flux_hyst, c->flux_ref_wb, mag);
-                uint8_t torque_up = hyst_step(&k->torque_hyst, &st->torque_hyst, torque_ref, torque);
+                float mag_c = mag, torque_c = torque;
+                if (k->delay_comp) {
+                    /* the vector chosen now acts from t_k+1: choose it from the state
+                     * predicted there, under the answer to SAMPLE k-1 that acts until then */
+                    float ua, ub, pa1, pb1, ia1, ib1;
+                    dtc_voltage(k, st->vector_prev2, st->vector_prev, vdc_v, i.i_alpha_a, i.i_beta_a, i.i_alpha_a,
+                                i.i_beta_a, &ua, &ub);
+                    fluxobs_predict(&k->flux, &st->flux, ua, ub, st->ekf.speed_rad_s, &pa1, &pb1, &ia1, &ib1);
+                    mag_c = flux_magnitude(pa1, pb1);                                  /* eq. (5) */
+                    torque_c = torque_estimate(k->pole_pairs, pa1, pb1, ia1, ib1);    /* eq. (6) */
+                    sector = swtab_sector_of_angle(fm_atan2(pb1, pa1));               /* eq. (10) */
+                }
+                uint8_t flux_up = hyst_step(&k->flux_hyst, &st->flux_hyst, c->flux_ref_wb, mag_c);
+                uint8_t torque_up = hyst_step(&k->torque_hyst, &st->torque_hyst, torque_ref, torque_c);
                 vector = k->vector_of[sector][(flux_up ? 0u : 2u) + (torque_up ? 0u : 1u)]; /* Table 3 */
             }
         }
     }
+    st->vector_prev3 = st->vector_prev2;
+    st->vector_prev2 = st->vector_prev;
     st->vector_prev = vector;
     uint8_t gates = vsi_gates_of_vector(vector);
     if (tm == NULL) {
@@ -383,6 +430,8 @@ static const param_desc param_table[] = {
     P(HIL_PARAM_CURRENT_BANDWIDTH_HZ, current_bandwidth_hz, PT_F32, 0, 1.0f, 1e5f),
     P(HIL_PARAM_FOC_ANGLE_SOURCE, foc_angle_source, PT_U8, 1, 0.0f, 1.0f),
     P(HIL_PARAM_DEAD_TIME_COMP_S, dead_time_comp_s, PT_F32, 0, 0.0f, 1e-5f),
+    P(HIL_PARAM_DEVICE_DROP_COMP_V, device_drop_comp_v, PT_F32, 0, 0.0f, 10.0f),
+    P(HIL_PARAM_DELAY_COMP_PERIODS, delay_comp_periods, PT_U8, 1, 0.0f, 1.0f),
 };
 
 #undef P

@@ -62,7 +62,9 @@ typedef struct {
     uint8_t control_law;      /* ctl_law */
     float current_bandwidth_hz; /* FOC current loop */
     uint8_t foc_angle_source; /* ctl_foc_angle */
-    float dead_time_comp_s;   /* FOC, 0 = off */
+    float dead_time_comp_s;   /* FOC duties and DTC observer voltage, 0 = off */
+    float device_drop_comp_v; /* DTC observer voltage, 0 = off */
+    uint8_t delay_comp_periods; /* DTC: 1 = answers act one period late: integrate the vector that acted, predict */
 } ctl_params;
 
 /* HIL_PARAM_CONTROL_LAW: the paper's DTC answers GATES, FOC answers DUTY */
@@ -85,6 +87,9 @@ typedef struct {
     rotor_cfg rotor;
     prot_cfg prot;
     foc_cfg foc;
+    invcomp_cfg inv;     /* DTC: the observer's inverter compensation */
+    uint8_t inv_comp_on; /* dead time or device drop compensated */
+    uint8_t delay_comp;  /* delay_comp_periods */
     uint8_t control_law;
     uint8_t foc_angle_source;
     float vdc_v_per_count;
@@ -121,7 +126,9 @@ typedef struct {
     uint16_t duty[3];   /* FOC: the DUTY answer when answer_duty */
     uint8_t answer_duty; /* 1: answer this SAMPLE with DUTY (duty[]), 0: with GATES */
     uint8_t started;    /* first SAMPLE seen */
-    uint8_t vector_prev; /* voltage vector 0..6 applied during the period that just ended */
+    uint8_t vector_prev; /* answer to the previous SAMPLE: vector 0..6 applied during the period that just ended (no delay) */
+    uint8_t vector_prev2; /* the answer before it (the vector that acted, with one period of delay) */
+    uint8_t vector_prev3; /* and before that (the dead-time edge, with one period of delay) */
     uint8_t state;      /* hil_state */
     uint8_t fault_code; /* hil_fault_code latched */
     float fault_value;
