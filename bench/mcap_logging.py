@@ -1,164 +1,258 @@
-"""Cost of logging a run to MCAP: microseconds per control period for the full-rate set
-(plant truth, sensors, controller telemetry, frames batched every N periods), per
-message, and file size per simulated second; with zstd, lz4 and no compression, and
-the mcap package's own Writer and JSON messages for comparison.
+"""Cost of logging a run to MCAP (docs/logging.md), on the channels the recorder writes.
 
-Values are a smooth simulated trajectory plus noise (so compression sees realistic,
-high-entropy doubles), generated before timing; timings are the best of `repeats`
-interleaved runs, so the machine's noise hits every variant alike.
+Data: a lockstep session over the in-process stub (Table 1 motor, encoder speed loop,
+1500 rpm, TELEMETRY every period as in the default profile) is run once without a log and
+its recorder's rows are kept: the plant truth (/plant/truth: t_s double + 18 floats), the
+sensor values (/plant/sensors: period + 5 fixed32), the board's TELEMETRY
+(/ctrl/telemetry: period, 4 fixed32, 12 floats) and the raw frames the link tap captured
+every 10 ms (/link/frames_out, /link/frames_in). The channels are made by
+`Recorder.attach_log` itself, so their layouts are the recorder's.
+
+Timed, each on a fresh log over the same rows, variants interleaved `repeats` times:
+
+- ``recorder_path``: what a session does, `Recorder.period` / `telemetry` / `frames` for
+  every period, so the full-rate channels go to the log in batches of
+  `LOG_BATCH_PERIODS` through `FixedChannel.write_many`; with lz4 64 KiB chunks (the
+  default), lz4 1 MiB, zstd 64 KiB and no compression. The in-memory lists the recorder
+  keeps for the checks are part of the cost (they are there with or without a log).
+- ``per_message_path``: the same rows and the same in-memory lists, but one
+  `FixedChannel.write` per message (the path before batching), lz4 64 KiB.
+- ``no_log``: the recorder without a log (its lists only); ``log_us_per_period`` of a
+  variant is its median minus this median: what the log itself costs a period.
+- ``chunk_finish_ms``: each chunk finish (compress, CRC, one write()) timed in the
+  default variant.
+- ``one_truth_message_us``: one /plant/truth message through `FixedChannel.write`,
+  through `mcap.writer.Writer.add_message` (the same bytes, packed beforehand) and as
+  JSON through `McapLog.write_json`.
+- ``read_s``: `log_summary` (what `hil log info` reads) and `read_log` of every channel on
+  the default variant's file.
+
+Every time is the median over the repeats (min and max given beside it). Sizes and chunk
+counts are the same in every repeat.
 """
 from __future__ import annotations
 
 import io
-import json
 import os
+import statistics
 import struct
 import tempfile
 import time
+from types import SimpleNamespace
 
 import numpy as np
 
-from hil.logs.mcap_writer import McapLog
-
-PERIOD_S = 50e-6
-FRAMES_PER_BATCH = 20  # one frames_in and one frames_out message per millisecond at 50 us
-
-# Representative of what the session logs (names are illustrative; the session owns them).
-TRUTH_FIELDS = [(n, "double") for n in (
-    "i_a_a", "i_b_a", "i_c_a", "i_d_a", "i_q_a", "psi_alpha_wb", "psi_beta_wb", "torque_nm",
-    "load_torque_nm", "speed_rad_s", "speed_rpm", "theta_e_rad", "theta_m_rad", "v_a_v", "v_b_v",
-    "v_c_v", "v_dc_v", "i_dc_a", "gate_state", "period")]
-SENSOR_FIELDS = [("adc_i_a", "fixed32"), ("adc_i_b", "fixed32"), ("adc_i_c", "fixed32"),
-                 ("adc_v_dc", "fixed32"), ("adc_v_a", "fixed32"), ("adc_v_b", "fixed32"),
-                 ("adc_v_c", "fixed32"), ("encoder_count", "fixed32"), ("encoder_index", "fixed32"),
-                 ("period", "fixed32")]
-TELEMETRY_FIELDS = [(n, "float") for n in (
-    "speed_est_rpm", "theta_est_rad", "psi_est_wb", "torque_est_nm", "torque_ref_nm", "psi_ref_wb",
-    "speed_ref_rpm", "i_alpha_a", "i_beta_a", "v_alpha_v", "v_beta_v", "ekf_p00", "ekf_p11",
-    "sector", "vector", "cycles", "status")]
+VARIANTS = (("lz4", 64 * 1024), ("lz4", 1024 * 1024), ("zstd", 64 * 1024), ("none", 64 * 1024))
 
 
-def _trajectory(n: int, n_fields: int, seed: int, integer: bool = False) -> list[tuple]:
-    rng = np.random.default_rng(seed)
-    t = np.arange(n)[:, None] * PERIOD_S
-    k = np.arange(n_fields)[None, :]
-    values = np.sin(2 * np.pi * 50.0 * t + k) * (1.0 + k) + rng.normal(0.0, 1e-3, (n, n_fields))
-    if integer:
-        return [tuple(row) for row in (2048 + values * 300).astype(np.int64).clip(0, 4095).tolist()]
-    return [tuple(row) for row in values.tolist()]
+def _session_rows(periods: int) -> dict:
+    """Rows of a real run: recorder lists and the tap's frame captures (no log written)."""
+    from hil.session.bench_session import BenchSession, SessionConfig
+    from plant_rt import load_profile
+
+    captures: list[tuple[int, dict]] = []
+    with BenchSession(load_profile(), SessionConfig(link="stub")) as s:
+        rec = s.recorder
+        original = rec.frames
+
+        def keep(k, capture):
+            captures.append((k, capture))
+            original(k, capture)
+
+        rec.frames = keep
+        s.send_command(enable=True, speed_source="encoder", speed_ref_rpm=1500)
+        s.run_periods(periods)
+        telemetry_fields = ("period", "sector", "speed_source", "state", "gates", "speed_feedback_rad_s",
+                            "speed_encoder_rad_s", "speed_raw_rad_s", "speed_lpf_rad_s", "speed_ekf_rad_s",
+                            "flux_angle_rad", "ekf_angle_rad", "flux_mag_wb", "torque_est_nm",
+                            "torque_ref_nm", "rotor_pos_conv_rad", "rotor_pos_ekf_rad")
+        telemetry = [SimpleNamespace(**dict(zip(telemetry_fields, row))) for row in rec.telemetry_rows]
+        return {"periods": list(rec.periods), "truth": list(rec.truth_rows),
+                "sensors": [SimpleNamespace(adc_i1=a, adc_i2=b, adc_vdc=c, encoder=d, status=e)
+                            for a, b, c, d, e in rec.sensor_rows],
+                "telemetry": {int(m.period): m for m in telemetry}, "frames": dict(captures),
+                "period_s": s.period_s}
 
 
-def _frames(n_batches: int, seed: int) -> list[bytes]:
-    rng = np.random.default_rng(seed)
-    return [rng.integers(0, 256, FRAMES_PER_BATCH * 24, dtype=np.uint8).tobytes() for _ in range(n_batches)]
+def _recorder_run(path: str | None, rows: dict, compression: str = "lz4", chunk_size: int = 64 * 1024,
+                  per_message: bool = False, finishes: list | None = None) -> float:
+    """Feeds a run's rows through a Recorder as the session does; path None: no log (the
+    recorder's in-memory lists only); per_message: the lists, plus one write() per message
+    instead of the batched write_many."""
+    from hil.logs.mcap_writer import McapLog
+    from hil.logs.recorder import Recorder
 
+    rec = Recorder(rows["period_s"])
+    log = None
+    if path is not None:
+        log = McapLog(path, metadata={"bench": {"what": "mcap_logging"}}, chunk_size=chunk_size,
+                      compression=compression)
+        if finishes is not None:
+            finish = log._finish_chunk
 
-def _run_session(path: str, n: int, data, compression: str, chunk_size: int) -> float:
-    truth_rows, sensor_rows, telemetry_rows, frames = data
-    log = McapLog(path, metadata={"bench": {"what": "mcap_logging"}}, chunk_size=chunk_size,
-                  compression=compression)
-    truth = log.add_fixed_channel("/plant/truth", "hil.PlantTruth", TRUTH_FIELDS)
-    sensors = log.add_fixed_channel("/plant/sensors", "hil.SensorValues", SENSOR_FIELDS)
-    telemetry = log.add_fixed_channel("/ctrl/telemetry", "hil.ControllerTelemetry", TELEMETRY_FIELDS)
-    frames_in = log.add_bytes_channel("/link/frames_in", "hil.FrameBatch")
-    frames_out = log.add_bytes_channel("/link/frames_out", "hil.FrameBatch")
-    period_ns = int(PERIOD_S * 1e9)
+            def timed_finish():
+                t0 = time.perf_counter_ns()
+                finish()
+                finishes.append((time.perf_counter_ns() - t0) / 1e6)
+
+            log._finish_chunk = timed_finish
+        rec.attach_log(log)
+    periods, truth, sensors, telemetry, frames = (rows["periods"], rows["truth"], rows["sensors"],
+                                                   rows["telemetry"], rows["frames"])
+    period, tele, frm = rec.period, rec.telemetry, rec.frames
     t_start = time.perf_counter()
-    for i in range(n):
-        t = i * period_ns
-        truth.write(t, *truth_rows[i])
-        sensors.write(t, *sensor_rows[i])
-        telemetry.write(t, *telemetry_rows[i])
-        if i % FRAMES_PER_BATCH == FRAMES_PER_BATCH - 1:
-            batch = frames[i // FRAMES_PER_BATCH]
-            frames_in.write(t, batch, FRAMES_PER_BATCH)
-            frames_out.write(t, batch, FRAMES_PER_BATCH)
-    log.close()
+    if per_message:
+        tr, se, te = rec._truth_ch.write, rec._sensor_ch.write, rec._telemetry_ch.write
+        rec._log = None                 # the lists only; the messages are written here
+        period_s = rows["period_s"]
+        for i, k in enumerate(periods):
+            t = round(k * period_s * 1e9)
+            if k in frames:
+                rec._log = log
+                frm(k, frames[k])
+                rec._log = None
+            period(k, truth[i], sensors[i])
+            tr(t, *truth[i])
+            s = sensors[i]
+            se(t, k, s.adc_i1, s.adc_i2, s.adc_vdc, s.encoder, s.status)
+            m = telemetry.get(k)
+            if m is not None:
+                tele(m)
+                te(t, *vars(m).values())
+    else:
+        for i, k in enumerate(periods):
+            if k in frames:
+                frm(k, frames[k])
+            period(k, truth[i], sensors[i])
+            m = telemetry.get(k)
+            if m is not None:
+                tele(m)
+        rec.flush_log()
+    if log is not None:
+        log.close()
     return time.perf_counter() - t_start
 
 
-def _per_message(n: int, rows: list[tuple], compression: str) -> dict[str, float]:
-    """One channel alone: hand-packed protobuf vs JSON vs the mcap package's Writer."""
+def _one_message(n: int, rows: list[tuple]) -> dict[str, float]:
+    """One /plant/truth message: our writer, mcap's Writer (same bytes), JSON."""
     from mcap.writer import CompressionType, Writer
+
+    from hil.logs.mcap_writer import McapLog
+    from hil.logs.recorder import Recorder
+    from plant_rt import TRUTH_FIELDS
 
     out = {}
     with tempfile.TemporaryDirectory() as tmp:
-        log = McapLog(os.path.join(tmp, "a.mcap"), compression=compression)
-        ch = log.add_fixed_channel("/plant/truth", "hil.PlantTruth", TRUTH_FIELDS)
+        log = McapLog(os.path.join(tmp, "a.mcap"))
+        rec = Recorder(50e-6)
+        rec.attach_log(log)
+        ch = rec._truth_ch
         t0 = time.perf_counter()
         for i in range(n):
             ch.write(i, *rows[i])
-        out["fixed_protobuf_us"] = (time.perf_counter() - t0) / n * 1e6
-        names = [name for name, _ in TRUTH_FIELDS]
-        dicts = [dict(zip(names, r)) for r in rows]
+        out["fixed_channel_write"] = (time.perf_counter() - t0) / n * 1e6
+        dicts = [dict(zip(TRUTH_FIELDS, r)) for r in rows[:n]]
         t0 = time.perf_counter()
         for i in range(n):
             log.write_json("/plant/truth_json", i, dicts[i])
-        out["json_us"] = (time.perf_counter() - t0) / n * 1e6
+        out["json"] = (time.perf_counter() - t0) / n * 1e6
         log.close()
-    pack = struct.Struct("<" + "Bd" * len(TRUTH_FIELDS)).pack
-    tags = [((k + 1) << 3) | 1 for k in range(len(TRUTH_FIELDS))]
-    comp = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}[compression]
-    writer = Writer(io.BytesIO(), chunk_size=64 * 1024, compression=comp)
-    writer.start()
-    cid = writer.register_channel("/plant/truth", "protobuf", writer.register_schema("x", "protobuf", b""))
+    fmt = "<" + "Bd" + "Bf" * (len(TRUTH_FIELDS) - 1)
+    pack = struct.Struct(fmt).pack
+    tags = [((1 << 3) | 1)] + [(((k + 1) << 3) | 5) for k in range(1, len(TRUTH_FIELDS))]
+    payloads = []
     args = [0] * (2 * len(TRUTH_FIELDS))
     args[0::2] = tags
-    t0 = time.perf_counter()
     for i in range(n):
         args[1::2] = rows[i]
-        writer.add_message(cid, i, pack(*args), i)
-    out["mcap_writer_packed_us"] = (time.perf_counter() - t0) / n * 1e6
+        payloads.append(pack(*args))
+    writer = Writer(io.BytesIO(), chunk_size=64 * 1024, compression=CompressionType.LZ4)
+    writer.start()
+    cid = writer.register_channel("/plant/truth", "protobuf", writer.register_schema("x", "protobuf", b""))
+    t0 = time.perf_counter()
+    for i in range(n):
+        writer.add_message(cid, i, payloads[i], i)
+    out["mcap_writer_add_message"] = (time.perf_counter() - t0) / n * 1e6
     writer.finish()
     return out
 
 
+def _stats(values: list[float], digits: int = 2) -> dict:
+    return {"median": round(statistics.median(values), digits), "min": round(min(values), digits),
+            "max": round(max(values), digits), "runs": len(values)}
+
+
 def run(quick: bool = False) -> dict:
+    from hil.logs.reader import log_summary, read_log
+    from hil.logs.recorder import LOG_BATCH_PERIODS
+
     n = 20_000 if quick else 100_000
-    repeats = 1 if quick else 4
-    data = (_trajectory(n, len(TRUTH_FIELDS), 1), _trajectory(n, len(SENSOR_FIELDS), 2, integer=True),
-            _trajectory(n, len(TELEMETRY_FIELDS), 3), _frames(n // FRAMES_PER_BATCH + 1, 4))
-    sim_s = n * PERIOD_S
+    repeats = 3 if quick else 7
+    rows = _session_rows(n)
+    n = len(rows["periods"])
+    sim_s = n * rows["period_s"]
+    frame_messages = sum(1 for c in rows["frames"].values() for _, count in c.values() if count)
+    messages = 2 * n + len(rows["telemetry"]) + frame_messages
     result: dict = {
-        "periods": n,
-        "simulated_s": sim_s,
-        "messages_per_period": 3 + 2 / FRAMES_PER_BATCH,
-        "full_rate_set": {"/plant/truth": f"{len(TRUTH_FIELDS)} double",
-                          "/plant/sensors": f"{len(SENSOR_FIELDS)} fixed32",
-                          "/ctrl/telemetry": f"{len(TELEMETRY_FIELDS)} float",
-                          "/link/frames_in+out": f"1 batch of {FRAMES_PER_BATCH} frames each per "
-                                                 f"{FRAMES_PER_BATCH} periods"},
+        "periods": n, "simulated_s": round(sim_s, 4), "repeats": repeats,
+        "log_batch_periods": LOG_BATCH_PERIODS,
+        "messages": messages, "messages_per_period": round(messages / n, 3),
+        "data": "lockstep session, --link stub, encoder speed loop at 1500 rpm, TELEMETRY every period",
     }
-    variants = (("lz4", 64 * 1024), ("lz4", 1024 * 1024), ("zstd", 64 * 1024), ("none", 64 * 1024))
-    best = {v: float("inf") for v in variants}
+    times: dict = {v: [] for v in VARIANTS}
+    times["per_message"] = []
+    times["no_log"] = []
+    finishes: list[float] = []
     with tempfile.TemporaryDirectory() as tmp:
-        # interleaved repeats, best of each: the machine's noise hits every variant alike
-        for _ in range(repeats):
-            for compression, chunk_size in variants:
+        for r in range(repeats):
+            for compression, chunk_size in VARIANTS:
                 path = os.path.join(tmp, f"{compression}_{chunk_size}.mcap")
-                elapsed = _run_session(path, n, data, compression, chunk_size)
-                best[(compression, chunk_size)] = min(best[(compression, chunk_size)], elapsed)
-        from hil.logs.reader import log_summary
-        for (compression, chunk_size), elapsed in best.items():
+                default = (compression, chunk_size) == VARIANTS[0]
+                times[(compression, chunk_size)].append(_recorder_run(
+                    path, rows, compression, chunk_size, False, finishes if default else None))
+            times["per_message"].append(_recorder_run(os.path.join(tmp, "per_message.mcap"), rows,
+                                                      per_message=True))
+            times["no_log"].append(_recorder_run(None, rows))
+        no_log = statistics.median(times["no_log"])
+        result["no_log_us_per_period"] = _stats([t / n * 1e6 for t in times["no_log"]])
+        recorder_path = {}
+        for (compression, chunk_size) in VARIANTS:
             path = os.path.join(tmp, f"{compression}_{chunk_size}.mcap")
             summary = log_summary(path)
             chunks = max(summary["chunk_count"], 1)
-            result[f"{compression}_{chunk_size // 1024}KiB"] = {
-                "us_per_period": round(elapsed / n * 1e6, 2),
-                "us_per_message": round(elapsed / (n * result["messages_per_period"]) * 1e6, 2),
+            recorder_path[f"{compression}_{chunk_size // 1024}KiB"] = {
+                "us_per_period": _stats([t / n * 1e6 for t in times[(compression, chunk_size)]]),
+                "log_us_per_period": round((statistics.median(times[(compression, chunk_size)]) - no_log) / n * 1e6, 2),
                 "file_bytes_per_simulated_s": round(os.path.getsize(path) / sim_s),
                 "chunks": summary["chunk_count"],
-                "simulated_ms_per_chunk": round(n / chunks * PERIOD_S * 1e3, 2),
+                "simulated_ms_per_chunk": round(n / chunks * rows["period_s"] * 1e3, 2),
                 "messages_per_chunk": round(summary["message_count"] / chunks),
             }
-    per_message = {}
+        result["recorder_path"] = recorder_path
+        result["per_message_path_lz4_64KiB"] = {
+            "us_per_period": _stats([t / n * 1e6 for t in times["per_message"]]),
+            "log_us_per_period": round((statistics.median(times["per_message"]) - no_log) / n * 1e6, 2)}
+        result["log_cost_per_message_over_batched_ratio"] = round(
+            (statistics.median(times["per_message"]) - no_log) / (statistics.median(times[VARIANTS[0]]) - no_log), 2)
+        result["chunk_finish_ms_lz4_64KiB"] = _stats(finishes, 3)
+        default_path = os.path.join(tmp, "lz4_65536.mcap")
+        reads, summaries = [], []
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            log_summary(default_path)
+            summaries.append(time.perf_counter() - t0)
+            t0 = time.perf_counter()
+            read_log(default_path)
+            reads.append(time.perf_counter() - t0)
+        result["read_s_lz4_64KiB_file"] = {"log_summary": _stats(summaries, 3), "read_log_all": _stats(reads, 3),
+                                           "messages": log_summary(default_path)["message_count"]}
     m = min(n, 20_000)
-    for compression in ("lz4", "zstd", "none"):
-        runs = [_per_message(m, data[0], compression) for _ in range(repeats)]
-        per_message[compression] = {k: round(min(r[k] for r in runs), 2) for k in runs[0]}
-    result["per_message_single_channel"] = per_message
+    runs = [_one_message(m, rows["truth"]) for _ in range(repeats)]
+    result["one_truth_message_us"] = {k: _stats([r[k] for r in runs]) for k in runs[0]}
     return result
 
 
 if __name__ == "__main__":
+    import json
+
     print(json.dumps(run(quick=True), indent=2))
