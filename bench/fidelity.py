@@ -201,7 +201,11 @@ def table(results: dict) -> str:
     lines = [head, "|" + "---|" * (len(COLUMNS) + 1)]
     for name, r in results["scenarios"].items():
         cells = []
+        tripped = r.get("tripped_at_s")
         for col in COLUMNS:
+            if tripped is not None and tripped < 0.90 and col[1].startswith("pos_"):
+                cells.append("tripped")  # the 1500 rpm, 1 Nm window comes after the trip
+                continue
             v = r[col[1]] * (col[3] if len(col) > 3 else 1.0)
             cells.append(col[2].format(v))
         trip = f" (tripped at {r['tripped_at_s']:.3f} s)" if r.get("tripped_at_s") else ""
