@@ -3,8 +3,8 @@ itself measures them with SysTick under QEMU's -icount (deterministic: one instr
 count; docs/porting.md), for the DTC law per speed source (hil.links.qemu
 measure_control_step) and for the FOC law (CONTROL_LAW = 1, answers DUTY) per speed source
 with the encoder angle and with the EKF angle (FOC_ANGLE_SOURCE 0/1), on the same synthetic
-rotating inputs (hil.links.qemu.rotating_samples); the firmware's flash and RAM and the
-board layer alone (the echo firmware); and the wall time of one SAMPLE -> answer exchange
+rotating inputs (hil.links.qemu.rotating_samples); the firmware's flash and RAM, the
+board layer alone (the echo firmware) and the protocol codec object alone; and the wall time of one SAMPLE -> answer exchange
 through the bench's serial link over QEMU's TCP UART (median). `hil bench` prints it beside
 the host figure of bench/stub.py (x86-64 instructions counted with callgrind)."""
 from __future__ import annotations
@@ -70,6 +70,7 @@ def run(quick: bool = False) -> dict:
     dtc = measure_control_step(samples=samples)
     foc = measure_foc_step(samples=samples, telemetry_divider=dtc["telemetry_divider"])
     echo = firmware_size(FIRMWARE_ELF.parent / "echo.elf")
+    codec = _codec_object_size()
     return {"icount_shift": dtc["icount_shift"], "hello_name": dtc["hello_name"],
             "telemetry_divider": dtc["telemetry_divider"],
             "instructions_per_ctl_step": {"dtc": dtc["modes"], "foc": foc["modes"]},
@@ -77,4 +78,17 @@ def run(quick: bool = False) -> dict:
             "round_trips": foc["round_trips"],
             "firmware": {k: dtc[k] for k in ("text_bytes", "data_bytes", "bss_bytes", "flash_bytes",
                                              "static_ram_bytes")},
-            "echo_firmware_board_layer": echo}
+            "echo_firmware_board_layer": echo,
+            "protocol_codec_object_cortex_m4f": codec}
+
+
+def _codec_object_size() -> dict:
+    """The C codec alone for the Cortex-M4F (`make -C protocol/c arm`: -Os), arm-none-eabi-size."""
+    import subprocess
+    from pathlib import Path
+
+    c_dir = Path(__file__).resolve().parent.parent / "protocol" / "c"
+    subprocess.run(["make", "-s", "-C", str(c_dir), "arm"], check=True, capture_output=True)
+    out = subprocess.run(["arm-none-eabi-size", str(c_dir / "build" / "arm" / "hil_proto.o")],
+                         capture_output=True, text=True, check=True).stdout.splitlines()[1].split()
+    return {"text_bytes": int(out[0]), "data_bytes": int(out[1]), "bss_bytes": int(out[2])}
