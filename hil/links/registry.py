@@ -186,7 +186,9 @@ def spawn_on_pty(spec: str, argv: list[str], transport: str = "serial") -> Board
         os.close(master)
         os.close(slave)
         raise LinkError(f"link '{spec}': cannot start {argv[0]}: {exc}") from exc
-    os.close(master)  # the child holds it now
+    # The bench keeps its copy of the master until the slave is open: a board that exits at
+    # once would otherwise take the pseudo-terminal (and /dev/pts/N) with it, and the bench
+    # would report a missing port instead of the board's exit status.
     tail = _StderrTail(proc.stderr)
     try:
         if transport == "serial":
@@ -199,6 +201,7 @@ def spawn_on_pty(spec: str, argv: list[str], transport: str = "serial") -> Board
         raise
     finally:
         os.close(slave)
+        os.close(master)  # the child holds it now
     conn = BoardConnection(spec, link, process=proc, _output=tail)
     conn._cleanups.append(lambda: _stop_process(proc))
     return conn

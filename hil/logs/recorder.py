@@ -104,11 +104,25 @@ class Recorder:
              msg.flux_mag_wb, msg.torque_est_nm, msg.torque_ref_nm, msg.rotor_pos_conv_rad,
              msg.rotor_pos_ekf_rad))
 
+    def clear(self) -> None:
+        """Forgets the rows kept in memory (a long run that checks as it goes), after writing
+        to the log the ones it does not have yet."""
+        self.flush_log()
+        for rows in (self.periods, self.truth_rows, self.sensor_rows, self.telemetry_rows):
+            rows.clear()
+        self._logged_periods = self._logged_telemetry = 0
+
     def flush_log(self) -> None:
         """Writes the rows not yet in the log (every LOG_BATCH_PERIODS periods, and before
         the log flushes or closes)."""
         if self._log is None:
             return
+        if len(self.periods) < self._logged_periods or \
+                len(self.telemetry_rows) < self._logged_telemetry:
+            # the lists were emptied behind the recorder's back (use clear()): what they held
+            # and the log did not is gone; log from here on
+            self._logged_periods = min(self._logged_periods, len(self.periods))
+            self._logged_telemetry = min(self._logged_telemetry, len(self.telemetry_rows))
         a, b = self._logged_periods, len(self.periods)
         if b > a:
             t_ns = _log_times(self.periods[a:b], self.period_s)

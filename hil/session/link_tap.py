@@ -204,6 +204,47 @@ class LinkTap:
     def send_bytes(self, data: bytes) -> None:
         self._pass("out", data)
 
+    def sample_exchanger(self):
+        """A function (k, adc_i1, adc_i2, adc_vdc, encoder, status) that sends SAMPLE(k) and
+        queues the answers in one C call, for a firmware library in this process with the C
+        codec; None where that does not apply (another link, the Python codec). It works only
+        while no link fault is active and nothing is queued: the caller checks `fast_ready`."""
+        from protocol import ccodec
+
+        target = getattr(self.link, "exchange_target", None)
+        if (target is None or not ccodec.AVAILABLE
+                or not isinstance(self._encoder, ccodec.FrameEncoder)
+                or not isinstance(self._decoder, ccodec.StreamDecoder)):
+            return None
+        exchange_sample = ccodec.exchange_sample
+        encoder, decoder, inbox = self._encoder, self._decoder, self._inbox
+        cap_out, cap_in = self.captured["out"], self.captured["in"]
+        frames = self.captured_frames
+        link = self.link
+
+        def exchange(k, adc_i1, adc_i2, adc_vdc, encoder_count, status):
+            target = link.exchange_target()
+            if target is None:
+                raise OSError(f"{link.url}: link is closed")
+            earlier = link.read_bytes(0.0)      # answers to earlier frames come first
+            if earlier:
+                self._take_in(earlier)
+            fn, fw = target
+            n_out, n_in = len(cap_out), len(cap_in)
+            msgs, frames_in = exchange_sample(fn, fw, encoder, decoder, cap_out, cap_in, k,
+                                              adc_i1, adc_i2, adc_vdc, encoder_count, status)
+            frames["out"] += 1
+            frames["in"] += frames_in
+            link.count_exchange(len(cap_out) - n_out, 1, len(cap_in) - n_in)
+            inbox.extend(msgs)
+        return exchange
+
+    @property
+    def fast_ready(self) -> bool:
+        """No link fault, nothing held, no half-read frame: the C exchange may bypass the tap
+        (messages already queued stay first: the exchange appends behind them)."""
+        return not self.faults and not self._held and not self._partial
+
     def _take_in(self, data: bytes) -> None:
         buf = self._partial
         buf += data

@@ -807,12 +807,136 @@ static PyTypeObject DecoderType = {
     .tp_getset = Decoder_getset,
 };
 
+
+/* ------------------------------------------------------------------ one period, in-process */
+
+typedef size_t (*fw_exchange_fn)(void *fw, const uint8_t *rx, size_t rx_len, uint8_t *tx, size_t tx_cap);
+
+#define EXCHANGE_TX_CAP 4096u
+
+static int append_bytes(PyObject *bytearray, const uint8_t *p, size_t n)
+{
+    if (bytearray == Py_None || n == 0u) {
+        return 0;
+    }
+    Py_ssize_t old = PyByteArray_GET_SIZE(bytearray);
+    if (PyByteArray_Resize(bytearray, old + (Py_ssize_t)n) < 0) {
+        return -1;
+    }
+    memcpy(PyByteArray_AS_STRING(bytearray) + old, p, n);
+    return 0;
+}
+
+static size_t count_delimiters(const uint8_t *p, size_t n)
+{
+    size_t count = 0;
+    for (size_t i = 0; i < n; i++) {
+        count += (p[i] == 0u);
+    }
+    return count;
+}
+
+PyDoc_STRVAR(exchange_sample_doc,
+"exchange_sample(exchange, fw, encoder, decoder, capture_out, capture_in, period, adc_i1, adc_i2,\n"
+"                adc_vdc, encoder_count, status) -> (messages, frames_in)\n\n"
+"One lockstep period with firmware in this process (hil_fw_abi.h), in one call: SAMPLE is\n"
+"encoded by the bench's C codec with encoder's sequence number, handed to the firmware's\n"
+"hil_fw_exchange (address `exchange`, instance `fw`) which decodes it with its own codec and\n"
+"answers; the answer bytes are decoded by `decoder`. Every byte still crosses both codecs; what\n"
+"is saved is the Python between them. The raw frames are appended to the bytearrays\n"
+"capture_out and capture_in (None: not captured). Returns the decoded messages and the number\n"
+"of frames the firmware sent.");
+
+static PyObject *mod_exchange_sample(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    (void)self;
+    if (nargs != 12) {
+        PyErr_SetString(PyExc_TypeError, "exchange_sample takes 12 arguments");
+        return NULL;
+    }
+    if (!ready()) {
+        return NULL;
+    }
+    void *fn_addr = PyLong_AsVoidPtr(args[0]);
+    void *fw = PyLong_AsVoidPtr(args[1]);
+    if (PyErr_Occurred()) {
+        return NULL;
+    }
+    if (fn_addr == NULL || fw == NULL) {
+        PyErr_SetString(PyExc_ValueError, "exchange_sample: null exchange function or instance");
+        return NULL;
+    }
+    if (!PyObject_TypeCheck(args[2], &EncoderType) || !PyObject_TypeCheck(args[3], &DecoderType)) {
+        PyErr_SetString(PyExc_TypeError, "exchange_sample: needs a protocol.ccodec FrameEncoder and StreamDecoder");
+        return NULL;
+    }
+    for (int i = 4; i < 6; i++) {
+        if (args[i] != Py_None && !PyByteArray_CheckExact(args[i])) {
+            PyErr_SetString(PyExc_TypeError, "exchange_sample: captures are bytearrays or None");
+            return NULL;
+        }
+    }
+    EncoderObject *enc = (EncoderObject *)args[2];
+    DecoderObject *dec = (DecoderObject *)args[3];
+    unsigned long v[6];
+    static const unsigned long max[6] = {0xFFFFFFFFul, 0xFFFFul, 0xFFFFul, 0xFFFFul, 0xFFFFul, 0x0Ful};
+    for (int i = 0; i < 6; i++) {
+        v[i] = PyLong_AsUnsignedLong(args[6 + i]);
+        if (PyErr_Occurred() || v[i] > max[i]) {
+            PyErr_Clear();
+            return PyErr_Format(PyExc_ValueError, "exchange_sample: SAMPLE field %d out of range", i);
+        }
+    }
+    hil_msg m;
+    memset(&m, 0, sizeof m);
+    m.type = HIL_MSG_SAMPLE;
+    m.seq = (uint8_t)enc->seq;
+    m.u.sample.period = (uint32_t)v[0];
+    m.u.sample.adc_i1 = (uint16_t)v[1];
+    m.u.sample.adc_i2 = (uint16_t)v[2];
+    m.u.sample.adc_vdc = (uint16_t)v[3];
+    m.u.sample.encoder = (uint16_t)v[4];
+    m.u.sample.status = (uint8_t)v[5];
+    uint8_t frame[HIL_MAX_ENCODED_FRAME];
+    int n_frame = hil_frame_encode(&m, frame, sizeof frame);
+    if (n_frame <= 0) {
+        PyErr_SetString(PyExc_ValueError, "exchange_sample: SAMPLE did not encode");
+        return NULL;
+    }
+    enc->seq = (enc->seq + 1u) & 0xFFu;
+    if (append_bytes(args[4], frame, (size_t)n_frame) < 0) {
+        return NULL;
+    }
+    fw_exchange_fn exchange = (fw_exchange_fn)(uintptr_t)fn_addr;
+    PyObject *out = PyList_New(0);
+    if (out == NULL) {
+        return NULL;
+    }
+    uint8_t tx[EXCHANGE_TX_CAP];
+    size_t frames_in = 0;
+    size_t n = exchange(fw, frame, (size_t)n_frame, tx, sizeof tx);
+    while (n > 0u) {
+        frames_in += count_delimiters(tx, n);
+        if (append_bytes(args[5], tx, n) < 0 || decode_into(dec, tx, n, out) < 0) {
+            Py_DECREF(out);
+            return NULL;
+        }
+        if (n < sizeof tx) {
+            break;
+        }
+        n = exchange(fw, NULL, 0u, tx, sizeof tx);   /* drain what did not fit */
+    }
+    PyObject *result = Py_BuildValue("(Nn)", out, (Py_ssize_t)frames_in);
+    return result;
+}
+
 /* ------------------------------------------------------------------ module */
 
 static PyMethodDef module_methods[] = {
     {"setup", mod_setup, METH_VARARGS, setup_doc},
     {"encode_frame", (PyCFunction)(void (*)(void))mod_encode_frame, METH_FASTCALL, encode_frame_doc},
     {"crc16", mod_crc16, METH_O, crc16_doc},
+    {"exchange_sample", (PyCFunction)(void (*)(void))mod_exchange_sample, METH_FASTCALL, exchange_sample_doc},
     {NULL, NULL, 0, NULL},
 };
 
