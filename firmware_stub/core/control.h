@@ -90,6 +90,7 @@ typedef struct {
     invcomp_cfg inv;     /* DTC: the observer's inverter compensation */
     uint8_t inv_comp_on; /* dead time or device drop compensated */
     uint8_t delay_comp;  /* delay_comp_periods */
+    uint8_t dtc_comp;    /* either of the two: the observer takes the compensated path */
     uint8_t control_law;
     uint8_t foc_angle_source;
     float vdc_v_per_count;
