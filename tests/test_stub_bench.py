@@ -11,10 +11,14 @@ from bench.stub import STUB, instructions_per_step
 
 pytestmark = pytest.mark.skipif(shutil.which("valgrind") is None, reason="needs valgrind")
 
-# measured 351 / 427 (EKF, gcc 12 -O2 with LTO); the bounds leave room for compiler
-# versions, not for a new trigonometric call or a lost inlining
-BOUND_WITHOUT_TELEMETRY = 390
-BOUND_WITH_TELEMETRY = 470
+# Regression bounds (not requirements: the issue's aim of < 300 is not met, README says why).
+# Measured 351 / 427 (EKF, gcc 12 -O2 with LTO) until the step gained the FOC dispatch
+# (issue 14) and the inverter and delay compensation switches (issue 15): now 380 / 467 (EKF),
+# 387 / 475 (encoder), with every compensation off. Rebased on that measurement with the same
+# ~10 % room as before: room for compiler versions, not for a new trigonometric call or a
+# lost inlining.
+BOUND_WITHOUT_TELEMETRY = 425
+BOUND_WITH_TELEMETRY = 520
 
 
 @pytest.fixture(scope="module", autouse=True)
