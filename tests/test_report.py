@@ -292,7 +292,7 @@ def fake_runner(monkeypatch):
     """hil.run.runner replaced by the model (the real runner is the lead's)."""
     calls: list[str] = []
 
-    def run_plan(plan, link=None, mode=None, out_dir=None):
+    def run_plan(plan, link=None, mode=None, out_dir=None, profile=None):
         calls.append(plan.name)
         result, signals = model_run(plan, link, mode, out_dir)
         if out_dir is not None:        # the runner's contract: reports in out_dir/<plan>/
@@ -405,7 +405,7 @@ def test_plugin_marginal_passes_with_a_warning(pytester, fake_runner):
 def test_plugin_reports_a_runner_failure_on_every_item(pytester, monkeypatch):
     calls = []
 
-    def run_plan(plan, link=None, mode=None, out_dir=None):
+    def run_plan(plan, link=None, mode=None, out_dir=None, profile=None):
         calls.append(plan.name)
         raise RuntimeError("board on 'stub' exited with status -11 while waiting for HELLO")
 
@@ -420,3 +420,23 @@ def test_plugin_reports_a_runner_failure_on_every_item(pytester, monkeypatch):
     result.assert_outcomes(failed=n_items)
     assert result.stdout.str().count("the plan could not run: RuntimeError: board on 'stub' exited") >= n_items
     assert calls == ["speed-step-sensored"]                  # run once, reported on every item
+
+
+def test_plugin_runs_each_listed_profile_and_findings_pass(pytester, monkeypatch):
+    """A plan listing two profiles gives one set of items per profile, each run on its own
+    profile; a finding (INFO) is recorded, never failed."""
+    monkeypatch.setenv("PYTEST_DISABLE_PLUGIN_AUTOLOAD", "1")
+    plans = pytester.mkdir("test_plans")
+    (plans / "two.yaml").write_text(
+        "name: two-profiles\n"
+        "profiles: [paper, paper-hardware]\n"
+        "steps:\n"
+        "  - run: {duration_s: 0.002}\n"
+        "  - check: {name: dc link, kind: final_value, signal: plant.v_dc,\n"
+        "            limits: {low: 60, high: 80, unit: V}}\n"
+        "  - check: {name: a claim that does not hold, kind: final_value, signal: plant.v_dc,\n"
+        "            role: finding, limits: {low: 100, unit: V}}\n")
+    result = pytester.runpytest("test_plans", *PLUGIN_ARGS, "-v")
+    result.assert_outcomes(passed=6)
+    result.stdout.fnmatch_lines(["*run?paper?*", "*run?paper-hardware?*",
+                                 "*a claim that does not hold?paper-hardware?*PASSED*"])

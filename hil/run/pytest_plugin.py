@@ -91,29 +91,35 @@ class PlanFile(pytest.File):
             self.plan = load_plan(self.path)
         except ConfigError as exc:
             raise self.CollectError(f"invalid plan: {exc}") from None
-        self._outcome: tuple[PlanResult, Any] | BaseException | None = None
-        yield PlanItem.from_parent(self, name="run")
-        for check in self.plan.checks:
-            yield CheckItem.from_parent(self, name=check.name, check_name=check.name,
-                                        line=check.line)
+        self._outcomes: dict[Any, tuple[PlanResult, Any] | BaseException] = {}
+        # A plan that lists several profiles is run on each: its items carry the profile.
+        profiles = list(self.plan.profiles) or [None]
+        for ref in profiles:
+            tag = f"[{ref.label}]" if len(profiles) > 1 else ""
+            yield PlanItem.from_parent(self, name=f"run{tag}", profile=ref)
+            for check in self.plan.checks:
+                yield CheckItem.from_parent(self, name=f"{check.name}{tag}", check_name=check.name,
+                                            line=check.line, profile=ref)
 
-    def result(self) -> PlanResult:
-        """The plan's result, running it on the first call."""
-        if self._outcome is None:
-            self._outcome = self._run()
-        if isinstance(self._outcome, BaseException):
+    def result(self, profile=None) -> PlanResult:
+        """The plan's result on `profile`, running it on the first call."""
+        key = None if profile is None else profile.label
+        if key not in self._outcomes:
+            self._outcomes[key] = self._run(profile)
+        outcome = self._outcomes[key]
+        if isinstance(outcome, BaseException):
             raise HilCheckFailure(f"{self.path}: the plan could not run: "
-                                  f"{type(self._outcome).__name__}: {self._outcome}")
-        return self._outcome[0]
+                                  f"{type(outcome).__name__}: {outcome}")
+        return outcome[0]
 
-    def _run(self):
+    def _run(self, profile):
         from hil.run.runner import run_plan
 
         opt = self.config.getoption
         try:
             # With out_dir, run_plan writes the log and the reports into out_dir/<plan>/.
             return run_plan(self.plan, link=opt("--hil-link"), mode=opt("--hil-mode"),
-                            out_dir=opt("--hil-out"))
+                            out_dir=opt("--hil-out"), profile=profile)
         except (KeyboardInterrupt, SystemExit):
             raise
         except Exception as exc:  # noqa: BLE001 - every item of this plan reports it
@@ -135,8 +141,12 @@ class PlanItem(_HilItem):
 
     line = 1
 
+    def __init__(self, *, profile=None, **kwargs):
+        super().__init__(**kwargs)
+        self.profile = profile
+
     def runtest(self) -> None:
-        result = self.parent.result()
+        result = self.parent.result(self.profile)
         self.user_properties.append(("outcome", result.outcome.value))
         self.user_properties.append(("reason", result.reason))
         if result.outcome in (Outcome.ERROR, Outcome.TIMEOUT, Outcome.ABORTED):
@@ -145,13 +155,14 @@ class PlanItem(_HilItem):
 
 
 class CheckItem(_HilItem):
-    def __init__(self, *, check_name: str, line: int, **kwargs):
+    def __init__(self, *, check_name: str, line: int, profile=None, **kwargs):
         super().__init__(**kwargs)
         self.check_name = check_name
         self.line = line
+        self.profile = profile
 
     def runtest(self) -> None:
-        result = self.parent.result()
+        result = self.parent.result(self.profile)
         check = _find(result, self.check_name)
         if check is None:
             raise HilCheckFailure(f"{result.source}:{self.line}: check '{self.check_name}' has no "
@@ -162,6 +173,10 @@ class CheckItem(_HilItem):
         if check.limits is not None:
             self.user_properties.append(("limits", check.limits.describe()))
         if check.outcome is Outcome.PASS:
+            return
+        if check.outcome is Outcome.INFO:
+            # a finding: recorded with its value, never a failure (hil.plans roles)
+            self.user_properties.append(("finding", check.message))
             return
         if check.outcome is Outcome.MARGINAL:
             warnings.warn(HilMarginalWarning(f"{self.check_name}: {check.message}"))
