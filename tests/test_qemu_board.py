@@ -243,7 +243,11 @@ def test_step_cycles_equal_the_instructions_qemu_executes(tmp_path):
         i += 1
     assert len(traced) == len(reported)
     overheads = {r - t for r, t in zip(reported, traced)}
-    assert len(overheads) == 1 and 0 <= min(overheads) <= 16, (reported, traced, overheads)
+    # A few instructions of set-up and return path, within one or two of each other: since
+    # the compensation paths went out of line (issue 15), ctl_step has more than one
+    # epilogue, and the first step (start-up tracking) leaves by another one.
+    assert max(overheads) - min(overheads) <= 2 and 0 <= min(overheads) <= 16, \
+        (reported, traced, overheads)
     assert min(reported) > 200
 
 
