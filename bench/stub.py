@@ -70,36 +70,17 @@ def closed_loop(source: int, seconds_per_step: float = 0.3) -> dict[str, float]:
     """Speed steps 0 -> 157.08 -> 314.16 rad/s with speed source `source`; figures vs truth."""
     import numpy as np
 
-    from hil.links.stub_library import StubLibraryLink
-    from plant_rt import TRUTH_FIELDS, Plant, load_profile
-    from protocol.messages import Command, Gates, ParamId, ParamSet, Sample, Telemetry
+    from hil.session.closed_loop import ClosedLoop
 
-    f = {name: i for i, name in enumerate(TRUTH_FIELDS)}
-    plant, link = Plant(load_profile()), StubLibraryLink()
-    link.send(ParamSet(int(ParamId.TELEMETRY_DIVIDER), 1.0))
-    link.recv()
     t_step = 50e-6
     n = int(round(seconds_per_step / t_step))
-    rows, tms = [], []
-    for ref in (157.08, 314.16):
-        link.send(Command(1, source, ref, 0.0, 0.0))
-        for _ in range(n):
-            s = plant.sample()
-            link.send(Sample(s.period, s.adc_i1, s.adc_i2, s.adc_vdc, s.encoder, s.status))
-            gates = tm = None
-            msg = link.recv()
-            while msg is not None:
-                if isinstance(msg, Gates):
-                    gates = msg.gates
-                elif isinstance(msg, Telemetry):
-                    tm = msg
-                msg = link.recv()
-            rows.append(plant.truth())
-            tms.append((tm.speed_ekf_rad_s, tm.speed_lpf_rad_s, tm.speed_encoder_rad_s, tm.rotor_pos_conv_rad,
-                        tm.rotor_pos_ekf_rad, tm.flux_mag_wb, tm.flux_angle_rad))
-            plant.step(gates)
-    truth, est = np.array(rows), np.array(tms)
-    w = truth[:, f["speed_rad_s"]]
+    parts = []
+    with ClosedLoop() as loop:          # the bench's own closed loop: session + stub + plant
+        for ref in (157.08, 314.16):
+            loop.command(source, ref)
+            parts.append(loop.run(seconds_per_step))
+    r = {name: np.concatenate([p[name] for p in parts]) for name in parts[0]}
+    w = r["speed_rad_s"]
     out: dict[str, float] = {}
     for k, ref in enumerate((157.08, 314.16)):
         seg = slice(k * n, (k + 1) * n)
@@ -107,21 +88,22 @@ def closed_loop(source: int, seconds_per_step: float = 0.3) -> dict[str, float]:
         ws = w[seg]
         outside = np.nonzero(np.abs(ws - ref) > 0.02 * (ref - start))[0]
         rpm = int(round(ref * 60 / (2 * np.pi), -1))
-        out[f"overshoot_pct_to_{rpm}rpm"] = round(100 * (ws.max() - ref) / (ref - start), 2)
-        out[f"settling_2pct_s_to_{rpm}rpm"] = round((outside[-1] + 1) * t_step if len(outside) else 0.0, 4)
+        out[f"overshoot_pct_to_{rpm}rpm"] = round(float(100 * (ws.max() - ref) / (ref - start)), 2)
+        out[f"settling_2pct_s_to_{rpm}rpm"] = round(float((outside[-1] + 1) * t_step) if len(outside) else 0.0, 4)
         tail = slice((k + 1) * n - n // 3, (k + 1) * n)  # last third of each step: steady state
         wt = w[tail]
         out[f"speed_error_mean_rad_s_at_{rpm}rpm"] = round(float(np.mean(wt) - ref), 3)
-        for j, name in enumerate(("ekf", "lpf", "encoder")):
-            out[f"{name}_speed_rms_error_rad_s_at_{rpm}rpm"] = round(float(np.sqrt(np.mean((est[tail, j] - wt) ** 2))), 3)
-        th = truth[tail, f["theta_e_rad"]]
-        for j, name in ((3, "conv"), (4, "ekf")):
-            err = (est[tail, j] - th + np.pi) % (2 * np.pi) - np.pi
+        for name in ("ekf", "lpf", "encoder"):
+            est = r[f"tm_speed_{name}_rad_s"][tail]
+            out[f"{name}_speed_rms_error_rad_s_at_{rpm}rpm"] = round(float(np.sqrt(np.mean((est - wt) ** 2))), 3)
+        th = r["theta_e_rad"][tail]
+        for field, name in (("tm_rotor_pos_conv_rad", "conv"), ("tm_rotor_pos_ekf_rad", "ekf")):
+            err = (r[field][tail] - th + np.pi) % (2 * np.pi) - np.pi
             out[f"rotor_pos_{name}_rms_error_rad_at_{rpm}rpm"] = round(float(np.sqrt(np.mean(err**2))), 5)
-        psi_est = est[tail, 5] * np.exp(1j * est[tail, 6])
-        psi = truth[tail, f["psi_alpha"]] + 1j * truth[tail, f["psi_beta"]]
+        psi_est = r["tm_flux_mag_wb"][tail] * np.exp(1j * r["tm_flux_angle_rad"][tail])
+        psi = r["psi_alpha"][tail] + 1j * r["psi_beta"][tail]
         out[f"flux_error_max_wb_at_{rpm}rpm"] = float(f"{np.max(np.abs(psi_est - psi)):.3g}")
-        out[f"torque_ripple_pp_nm_at_{rpm}rpm"] = round(float(np.ptp(truth[tail, f["torque_nm"]])), 3)
+        out[f"torque_ripple_pp_nm_at_{rpm}rpm"] = round(float(np.ptp(r["torque_nm"][tail])), 3)
     return out
 
 

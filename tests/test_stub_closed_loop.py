@@ -10,12 +10,10 @@ import subprocess
 import numpy as np
 import pytest
 
-from hil.links.stub_library import STUB_DIR, StubLibraryLink
-from plant_rt import TRUTH_FIELDS, Plant, load_profile
-from protocol.messages import Command, Fault, Gates, ParamId, ParamSet, ParamValue, Sample, Status, Telemetry
+from hil.links.stub_library import STUB_DIR
+from hil.session.closed_loop import ClosedLoop
 
 T = 50e-6
-F = {name: i for i, name in enumerate(TRUTH_FIELDS)}
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -23,50 +21,23 @@ def built() -> None:
     subprocess.run(["make", "-s", "-C", str(STUB_DIR)], check=True, capture_output=True)
 
 
-class Rig:
-    """Plant + in-process stub, lockstep, telemetry every period."""
+_open: list[ClosedLoop] = []
 
-    def __init__(self, params: dict | None = None) -> None:
-        self.plant = Plant(load_profile())
-        self.link = StubLibraryLink()
-        self.faults: list[Fault] = []
-        self.states: list[int] = []
-        for name, value in {"TELEMETRY_DIVIDER": 1, **(params or {})}.items():
-            self.link.send(ParamSet(int(ParamId[name]), float(value)))
-            answer = self.link.recv()
-            assert isinstance(answer, ParamValue) and answer.status == 0, answer
 
-    def command(self, source: int, speed_rad_s: float, flags: int = 1) -> None:
-        self.link.send(Command(flags, source, speed_rad_s, 0.0, 0.0))
+@pytest.fixture(autouse=True)
+def _close_loops():
+    yield
+    while _open:
+        _open.pop().__exit__(None, None, None)
 
-    def run(self, seconds: float) -> dict[str, np.ndarray]:
-        rows, tms = [], []
-        plant, link = self.plant, self.link
-        for _ in range(int(round(seconds / T))):
-            s = plant.sample()
-            link.send(Sample(s.period, s.adc_i1, s.adc_i2, s.adc_vdc, s.encoder, s.status))
-            gates, tm = None, None
-            msg = link.recv()
-            while msg is not None:
-                if isinstance(msg, Gates):
-                    gates = msg.gates
-                elif isinstance(msg, Telemetry):
-                    tm = msg
-                elif isinstance(msg, Fault):
-                    self.faults.append(msg)
-                elif isinstance(msg, Status):
-                    self.states.append(msg.state)
-                msg = link.recv()
-            assert gates is not None and tm is not None
-            rows.append(plant.truth())
-            tms.append(tm)
-            plant.step(gates)
-        truth = np.array(rows)
-        out = {name: truth[:, i] for name, i in F.items()}
-        for field in ("speed_encoder_rad_s", "speed_lpf_rad_s", "speed_ekf_rad_s", "flux_mag_wb",
-                      "flux_angle_rad", "torque_est_nm", "rotor_pos_conv_rad", "rotor_pos_ekf_rad", "state"):
-            out["tm_" + field] = np.array([getattr(t, field) for t in tms], dtype=float)
-        return out
+
+def Rig(params: dict | None = None) -> ClosedLoop:
+    """Plant + in-process stub, lockstep, telemetry every period: the bench's own closed
+    loop (hil.session.closed_loop), with board parameters by their SPEC names; closed after
+    the test."""
+    loop = ClosedLoop(controller={name.lower(): value for name, value in (params or {}).items()})
+    _open.append(loop.__enter__())
+    return loop
 
 
 def wrap(x):
