@@ -6,6 +6,7 @@ import struct
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 
@@ -182,8 +183,9 @@ def test_shoot_through_and_board_fault_printed_once(tmp_path, capsys):
     assert "period 0 (t = 0 s): GATES 0x03 turns on A high and A low together (shoot-through)" in err
 
 
-def test_heartbeat_only_board_ends_hil_run_with_exit_2_within_15_s(tmp_path):
-    """The issue's acceptance: a board process that answers HEARTBEAT but never GATES."""
+def write_heartbeat_board(tmp_path) -> Path:
+    """An executable board that does HELLO and parameters, then answers every SAMPLE with
+    HEARTBEAT and never with GATES."""
     script = tmp_path / "heartbeat_board.py"
     script.write_text(f"""
 import os, sys
@@ -213,6 +215,12 @@ while True:
     board = tmp_path / "heartbeat_board"
     board.write_text(f"#!/bin/sh\nexec {sys.executable} {script}\n")
     board.chmod(0o755)
+    return board
+
+
+def test_heartbeat_only_board_ends_hil_run_with_exit_2_within_15_s(tmp_path):
+    """The issue's acceptance: a board process that answers HEARTBEAT but never GATES."""
+    board = write_heartbeat_board(tmp_path)
     plan = tmp_path / "plan.yaml"
     plan.write_text("name: hb\nsteps:\n  - run: {duration_s: 1.0}\n")
     t0 = time.monotonic()
