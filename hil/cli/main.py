@@ -90,6 +90,14 @@ def _parser() -> argparse.ArgumentParser:
     sweep.add_argument("--resume", action="store_true",
                        help="continue an interrupted sweep in --out without repeating finished runs")
     sweep.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+    from hil.cli.init import add_arguments as init_arguments
+
+    init = sub.add_parser("init", help="scaffold a bench project for your motor and firmware",
+                          description="Write a bench profile from nameplate values, starter plans "
+                                      "with limits derived from them, CI files and a README "
+                                      "(docs/init.md).")
+    init_arguments(init)
     return parser
 
 
@@ -119,6 +127,10 @@ def main(argv: list[str] | None = None) -> int:
             from hil.sweep.run import sweep_command
 
             return sweep_command(args)
+        if args.command == "init":
+            from hil.cli.init import init_command
+
+            return init_command(args)
     except KeyboardInterrupt:
         print("hil: interrupted", file=sys.stderr)
         return EXIT_ERROR
