@@ -21,6 +21,8 @@ from tests.fake_board import FakeBoard
 
 FAST = SessionPolicy(hello_wait_s=0.2, param_wait_s=0.2, answer_wait_min_s=0.02, watchdog_s=0.5)
 
+REPO = Path(__file__).resolve().parents[1]
+
 
 def _session(board, tmp_path=None, **config) -> BenchSession:
     config.setdefault("policy", FAST)
@@ -230,3 +232,49 @@ def test_heartbeat_only_board_ends_hil_run_with_exit_2_within_15_s(tmp_path):
     assert time.monotonic() - t0 < 15.0
     assert proc.returncode == 2, proc.stdout + proc.stderr
     assert "board sent only HEARTBEAT" in proc.stdout + proc.stderr
+
+
+def test_a_board_that_keeps_talking_cannot_hold_the_answer_wait(tmp_path):
+    """A board that sends HEARTBEAT every 20 ms of its own accord, shorter than the 0.1 s
+    answer wait, and never GATES: each wait still ends at its one deadline (SPEC 2.8), so the
+    run ends by the watchdog within seconds. (A wait that restarted on every frame would never
+    end: issue 13, item 1.)"""
+    script = tmp_path / "chatty_board.py"
+    script.write_text(f"""
+import os, select, sys, time
+sys.path.insert(0, {str(REPO)!r})
+from protocol.codec import FrameEncoder, StreamDecoder
+from protocol.messages import Hello, ParamSet, ParamGet, ParamValue, Heartbeat
+enc, dec = FrameEncoder(), StreamDecoder()
+params, beat, next_beat = {{}}, 0, time.monotonic()
+while True:
+    ready, _, _ = select.select([0], [], [], 0.005)
+    if ready:
+        data = os.read(0, 4096)
+        if not data:
+            break
+        for m in dec.feed(data):
+            if isinstance(m, Hello):
+                os.write(1, enc.encode(Hello(1, 1, 1, m.control_period_ns, 2, b"hb")))
+            elif isinstance(m, ParamSet):
+                params[m.id] = m.value
+                os.write(1, enc.encode(ParamValue(m.id, 0, m.value)))
+            elif isinstance(m, ParamGet):
+                os.write(1, enc.encode(ParamValue(m.id, 0, params.get(m.id, 0.0))))
+    if time.monotonic() >= next_beat:
+        beat += 1
+        next_beat += 0.02
+        os.write(1, enc.encode(Heartbeat(beat)))
+""")
+    board = tmp_path / "chatty_board"
+    board.write_text(f"#!/bin/sh\nexec {sys.executable} {script}\n")
+    board.chmod(0o755)
+    plan = tmp_path / "plan.yaml"
+    plan.write_text("name: chatty\nsteps:\n  - run: {duration_s: 1.0}\n")
+    t0 = time.monotonic()
+    proc = subprocess.run([sys.executable, "-m", "hil.cli.main", "run", str(plan), "--link",
+                           f"exec:{board}", "--out", str(tmp_path / "out"), "--no-progress"],
+                          capture_output=True, text=True, timeout=60)
+    assert time.monotonic() - t0 < 15.0
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert "watchdog" in proc.stdout + proc.stderr
