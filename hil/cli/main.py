@@ -50,6 +50,12 @@ def _parser() -> argparse.ArgumentParser:
                        help="speed feedback the board closes its loop on (default encoder)")
     serve.add_argument("--enable", action="store_true",
                        help="enable the board at start (otherwise: Modbus run bit)")
+    serve.add_argument("--live", metavar="[HOST:]PORT", nargs="?", const="127.0.0.1:8765",
+                       help="Foxglove WebSocket server for live viewing (default 127.0.0.1:8765)")
+    serve.add_argument("--live-rate-hz", type=float, default=1000.0,
+                       help="rows per second of simulated time sent to viewers (default 1000)")
+    serve.add_argument("--pace", choices=("fast", "realtime"), default="fast",
+                       help="lockstep as fast as it runs, or paced to the wall clock for a viewer")
 
     log = sub.add_parser("log", help="inspect an MCAP log", description="Inspect an MCAP log of a run.")
     log_sub = log.add_subparsers(dest="log_command", required=True, metavar="ACTION")

@@ -27,7 +27,7 @@ def parse_host_port(text: str, default_host: str = "127.0.0.1") -> tuple[str, in
 
 
 def serve_command(args) -> int:
-    from hil.faults.injector import MODBUS_BIT_MASK, apply_fault_bits
+    from hil.faults.injector import MODBUS_BIT_MASK
     from hil.ports.modbus import ControlMailbox, ModbusPort
 
     profile = load_bench_profile(args.profile)
@@ -43,6 +43,40 @@ def serve_command(args) -> int:
                           isolation="process" if args.mode == "realtime" else "thread")
     chunk = max(1, round(0.01 / profile.control_period_s))  # 10 ms of simulated time
     total = None if args.duration is None else round(args.duration / profile.control_period_s)
+    live = None
+    if getattr(args, "live", None):
+        from hil.live import LiveStream, parse_live_address
+
+        live_host, live_port = parse_live_address(args.live)
+        live = LiveStream(live_host, live_port, period_s=profile.control_period_s,
+                          rate_hz=args.live_rate_hz, mode=args.mode)
+    pace = getattr(args, "pace", "fast") == "realtime"
+    try:
+        return _serve(args, profile, config, mailbox, port, live, chunk, total, pace)
+    finally:
+        if live is not None:
+            live.close()
+
+
+def _apply_live(session, live, apply_fault_bits) -> None:
+    """Commands viewers published on /cmd, applied between periods like Modbus requests."""
+    for cmd in live.take_commands():
+        change = {k: cmd[k] for k in ("speed_ref_rpm", "enable", "speed_source") if k in cmd}
+        if change:
+            session.send_command(**change)
+        if "load_torque_nm" in cmd:
+            session.plant.load.set_constant(cmd["load_torque_nm"])
+            session.event("live", load_torque_nm=cmd["load_torque_nm"])
+        if "fault_bits" in cmd:
+            apply_fault_bits(session, cmd["fault_bits"])
+    for error in live.errors:
+        print(f"hil serve: live: {error}", file=sys.stderr)
+    live.errors.clear()
+
+
+def _serve(args, profile, config, mailbox, port, live, chunk, total, pace) -> int:
+    from hil.faults.injector import apply_fault_bits
+
     with BenchSession(profile, config) as session:
         session.attach_mailbox(mailbox, on_fault_bits=lambda bits: apply_fault_bits(session, bits))
         session.send_command(enable=args.enable, speed_source=args.speed_source,
@@ -50,6 +84,9 @@ def serve_command(args) -> int:
         if port is not None:
             port.start()
         where = f", Modbus TCP on {port.host}:{port.port}" if port is not None else ""
+        if live is not None:
+            session.recorder.live = live
+            where += f", live (Foxglove) on {live.url}"
         print(f"hil serve: board '{session.board_name}' on {args.link}{where}; Ctrl-C stops",
               file=sys.stderr)
         ran = 0
@@ -57,7 +94,14 @@ def serve_command(args) -> int:
         try:
             while total is None or ran < total:
                 n = chunk if total is None else min(chunk, total - ran)
+                if live is not None:
+                    _apply_live(session, live, apply_fault_bits)
                 ran += session.run_periods(n)
+                if pace:
+                    # paced for a viewer: simulated time does not run ahead of the wall clock
+                    ahead = ran * profile.control_period_s - (time.monotonic() - started)
+                    if ahead > 0:
+                        time.sleep(ahead)
         except KeyboardInterrupt:
             print("hil serve: stopping (Ctrl-C): plant safe-stated, log closed", file=sys.stderr)
         finally:

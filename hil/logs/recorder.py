@@ -70,6 +70,9 @@ class Recorder:
         self._frames_ch = None
         self._logged_periods = 0        # rows of periods/truth/sensors already in the log
         self._logged_telemetry = 0
+        # hil.live.LiveStream (or anything with period(), telemetry_row() and `every`): every
+        # `every`-th row goes to the live viewers too
+        self.live = None
 
     def attach_log(self, log) -> None:
         self._log = log
@@ -95,14 +98,20 @@ class Recorder:
                                  sample.status))
         if self._log is not None and len(periods) - self._logged_periods >= LOG_BATCH_PERIODS:
             self.flush_log()
+        live = self.live
+        if live is not None and k % live.every == 0:
+            live.period(k, truth, sample)
 
     def telemetry(self, msg) -> None:
-        self.telemetry_rows.append(
-            (msg.period, msg.sector, msg.speed_source, msg.state, msg.gates,
-             msg.speed_feedback_rad_s, msg.speed_encoder_rad_s, msg.speed_raw_rad_s,
-             msg.speed_lpf_rad_s, msg.speed_ekf_rad_s, msg.flux_angle_rad, msg.ekf_angle_rad,
-             msg.flux_mag_wb, msg.torque_est_nm, msg.torque_ref_nm, msg.rotor_pos_conv_rad,
-             msg.rotor_pos_ekf_rad))
+        row = (msg.period, msg.sector, msg.speed_source, msg.state, msg.gates,
+               msg.speed_feedback_rad_s, msg.speed_encoder_rad_s, msg.speed_raw_rad_s,
+               msg.speed_lpf_rad_s, msg.speed_ekf_rad_s, msg.flux_angle_rad, msg.ekf_angle_rad,
+               msg.flux_mag_wb, msg.torque_est_nm, msg.torque_ref_nm, msg.rotor_pos_conv_rad,
+               msg.rotor_pos_ekf_rad)
+        self.telemetry_rows.append(row)
+        live = self.live
+        if live is not None and msg.period % live.every == 0:
+            live.telemetry_row(row)
 
     def clear(self) -> None:
         """Forgets the rows kept in memory (a long run that checks as it goes), after writing

@@ -1,0 +1,170 @@
+"""The bench's channels over the Foxglove WebSocket protocol, while a run goes on.
+
+foxglove-sdk's server (Rust, in its own threads) carries `/plant/truth`, `/plant/sensors` and
+`/ctrl/telemetry` with the very protobuf schemas the MCAP log has (hil.logs.mcap_writer
+fixed_descriptor_set), so a Foxglove layout works on a log and on a live bench alike. The
+period loop never waits for a viewer: every `every`-th period (1 kHz by default) the recorder
+hands the row over and `Channel.log` queues it in the server, which drops what a slow client
+cannot take (its backlog is bounded); the log keeps every period.
+
+A viewer may publish JSON on the client topic `/cmd` (Foxglove's Publish panel):
+`{"speed_ref_rpm": 1500}`, `{"enable": true}`, `{"load_torque_nm": 0.5}`,
+`{"fault_bits": 4}` (the Modbus fault bits). The messages are queued; the session applies
+them between periods (`take_commands`), as it does the Modbus mailbox's requests.
+
+The server binds to 127.0.0.1 unless another host is given.
+"""
+from __future__ import annotations
+
+import json
+import struct
+import threading
+from collections import deque
+from typing import Any
+
+import foxglove
+from foxglove.websocket import Capability
+
+from hil.logs.mcap_writer import FIXED_TYPES, fixed_descriptor_set, tag_varint
+
+COMMAND_TOPIC = "/cmd"
+COMMAND_KEYS = {"speed_ref_rpm": float, "enable": bool, "load_torque_nm": float,
+                "fault_bits": int, "speed_source": str}
+
+
+def parse_live_address(text: str, default_port: int = 8765) -> tuple[str, int]:
+    """[HOST:]PORT -> (host, port); host defaults to loopback."""
+    host, _, port = text.rpartition(":")
+    try:
+        number = int(port) if port else default_port
+    except ValueError:
+        raise ValueError(f"live address '{text}': expected [HOST:]PORT") from None
+    if not 0 <= number <= 65535:
+        raise ValueError(f"live address '{text}': port {number} is out of range")
+    return host or "127.0.0.1", number
+
+
+def payload_struct(fields: list[tuple[str, str]]) -> tuple[struct.Struct, tuple[int, ...]]:
+    """The protobuf payload of a fixed-width message (tags and values, in field order) as a
+    struct, and the tags to interleave with the values."""
+    fmt = "<"
+    tags = []
+    for number, (_, type_name) in enumerate(fields, start=1):
+        _, wire, code = FIXED_TYPES[type_name]
+        tag = tag_varint(number, wire)
+        fmt += ("B" if len(tag) == 1 else "H") + code
+        tags.append(int.from_bytes(tag, "little"))
+    return struct.Struct(fmt), tuple(tags)
+
+
+class _FixedTopic:
+    def __init__(self, context, topic: str, message_name: str, fields: list[tuple[str, str]],
+                 metadata: dict[str, str]):
+        schema = foxglove.Schema(name=message_name, encoding="protobuf",
+                                 data=fixed_descriptor_set(message_name, fields))
+        self.channel = foxglove.Channel(topic, schema=schema, message_encoding="protobuf",
+                                        context=context, metadata=metadata)
+        self._struct, tags = payload_struct(fields)
+        self._args = [0] * (2 * len(tags))
+        self._args[0::2] = tags
+
+    def log(self, log_time_ns: int, values) -> None:
+        args = self._args
+        args[1::2] = values
+        self.channel.log(self._struct.pack(*args), log_time=log_time_ns)
+
+
+class _Listener:
+    """Collects what viewers publish on /cmd; everything else is ignored."""
+
+    def __init__(self, stream: "LiveStream"):
+        self._stream = stream
+        self._topics: dict[tuple[int, int], str] = {}
+
+    def on_client_advertise(self, client, channel) -> None:
+        self._topics[(client.id, channel.id)] = channel.topic
+
+    def on_client_unadvertise(self, client, client_channel_id: int) -> None:
+        self._topics.pop((client.id, client_channel_id), None)
+
+    def on_message_data(self, client, client_channel_id: int, data: bytes) -> None:
+        if self._topics.get((client.id, client_channel_id)) == COMMAND_TOPIC:
+            self._stream._command(data)
+
+
+class LiveStream:
+    """A Foxglove WebSocket server carrying the run; `every` periods between two rows sent."""
+
+    def __init__(self, host: str = "127.0.0.1", port: int = 8765, *, period_s: float,
+                 rate_hz: float = 1000.0, mode: str = "lockstep", name: str = "hil-bench"):
+        from plant_rt import TRUTH_FIELDS
+
+        from hil.logs.recorder import SENSOR_FIELDS, TELEMETRY_FIELDS
+
+        self.every = max(1, round(1.0 / (rate_hz * period_s)))
+        self.period_s = period_s
+        self.errors: list[str] = []
+        self._commands: deque[dict[str, Any]] = deque()
+        self._lock = threading.Lock()
+        self._context = foxglove.Context()
+        # Lockstep runs as fast as it can: the viewer is told that simulated time is not wall time.
+        metadata = {"clock": mode, "period_s": repr(period_s),
+                    "decimation": str(self.every),
+                    "note": ("simulated time; lockstep runs faster than real time"
+                             if mode == "lockstep" else "wall-clock time")}
+        self.truth = _FixedTopic(self._context, "/plant/truth", "hil.PlantTruth",
+                                 [(f, "double" if f == "t_s" else "float") for f in TRUTH_FIELDS],
+                                 metadata)
+        self.sensors = _FixedTopic(self._context, "/plant/sensors", "hil.SensorSample",
+                                   [("period", "fixed32")] + [(f, "fixed32") for f in SENSOR_FIELDS],
+                                   metadata)
+        self.telemetry = _FixedTopic(self._context, "/ctrl/telemetry", "hil.Telemetry",
+                                     [("period", "fixed32")] + [(f, "fixed32" if i < 4 else "float")
+                                                                for i, f in enumerate(TELEMETRY_FIELDS)],
+                                     metadata)
+        self.server = foxglove.start_server(
+            name=name, host=host, port=port, context=self._context,
+            capabilities=[Capability.ClientPublish], supported_encodings=["json"],
+            server_listener=_Listener(self), message_backlog_size=1024)
+        self.host, self.port = host, self.server.port
+
+    @property
+    def url(self) -> str:
+        return f"ws://{self.host}:{self.port}"
+
+    # ------------------------------------------------------------- from the recorder
+    def period(self, k: int, truth: tuple, sample) -> None:
+        t_ns = round(k * self.period_s * 1e9)
+        self.truth.log(t_ns, truth)
+        self.sensors.log(t_ns, (k, sample.adc_i1, sample.adc_i2, sample.adc_vdc, sample.encoder,
+                                sample.status))
+
+    def telemetry_row(self, row: tuple) -> None:
+        self.telemetry.log(round(row[0] * self.period_s * 1e9), row)
+
+    # ------------------------------------------------------------- from the viewers
+    def _command(self, data: bytes) -> None:
+        try:
+            msg = json.loads(data)
+            if not isinstance(msg, dict):
+                raise ValueError("expected a JSON object")
+            clean = {}
+            for key, value in msg.items():
+                if key not in COMMAND_KEYS:
+                    raise ValueError(f"unknown key '{key}' (known: {', '.join(COMMAND_KEYS)})")
+                clean[key] = COMMAND_KEYS[key](value)
+        except (ValueError, TypeError) as exc:
+            with self._lock:
+                self.errors.append(f"{COMMAND_TOPIC}: {exc}")
+            return
+        with self._lock:
+            self._commands.append(clean)
+
+    def take_commands(self) -> list[dict[str, Any]]:
+        with self._lock:
+            out = list(self._commands)
+            self._commands.clear()
+        return out
+
+    def close(self) -> None:
+        self.server.stop()

@@ -1,0 +1,141 @@
+"""Watching it live (issue 17): a WebSocket client speaking the Foxglove SDK's protocol
+(subprotocol foxglove.sdk.v1, the JSON/binary ops of Foxglove's ws-protocol) connects to
+`hil serve --live`, subscribes to /plant/truth and /ctrl/telemetry, decodes the protobuf
+messages with the schemas the server advertises, checks that the speed follows the
+reference, publishes a new reference on /cmd and sees the speed follow it."""
+from __future__ import annotations
+
+import asyncio
+import base64
+import json
+import socket
+import struct
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import websockets
+from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
+
+REPO = Path(__file__).resolve().parents[1]
+SUBPROTOCOL = "foxglove.sdk.v1"
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def message_class(channel: dict):
+    """The protobuf class of an advertised channel, from its FileDescriptorSet."""
+    fds = descriptor_pb2.FileDescriptorSet.FromString(base64.b64decode(channel["schema"]))
+    pool = descriptor_pool.DescriptorPool()
+    for f in fds.file:
+        pool.Add(f)
+    return message_factory.GetMessageClass(pool.FindMessageTypeByName(channel["schemaName"]))
+
+
+class Viewer:
+    def __init__(self, ws):
+        self.ws = ws
+        self.channels: dict[str, dict] = {}
+        self.classes: dict[int, tuple[str, type]] = {}
+
+    async def advertised(self, topics: set[str], timeout_s: float = 10.0) -> None:
+        deadline = time.monotonic() + timeout_s
+        while not topics <= set(self.channels):
+            m = await asyncio.wait_for(self.ws.recv(), max(0.1, deadline - time.monotonic()))
+            if isinstance(m, str) and json.loads(m)["op"] == "advertise":
+                for c in json.loads(m)["channels"]:
+                    self.channels[c["topic"]] = c
+
+    async def subscribe(self, topics: list[str]) -> None:
+        subs = []
+        for i, topic in enumerate(topics, start=1):
+            c = self.channels[topic]
+            assert c["encoding"] == "protobuf" and c["schemaEncoding"] == "protobuf"
+            self.classes[i] = (topic, message_class(c))
+            subs.append({"id": i, "channelId": c["id"]})
+        await self.ws.send(json.dumps({"op": "subscribe", "subscriptions": subs}))
+
+    async def messages(self, seconds: float):
+        """(topic, decoded message) for `seconds` of wall time."""
+        out = []
+        deadline = time.monotonic() + seconds
+        while time.monotonic() < deadline:
+            try:
+                m = await asyncio.wait_for(self.ws.recv(), max(0.05, deadline - time.monotonic()))
+            except asyncio.TimeoutError:
+                break
+            if isinstance(m, bytes) and m[0] == 0x01:          # message data
+                sub_id, _log_time = struct.unpack_from("<IQ", m, 1)
+                topic, cls = self.classes[sub_id]
+                out.append((topic, cls.FromString(m[13:])))
+        return out
+
+    async def publish_command(self, command: dict) -> None:
+        await self.ws.send(json.dumps({"op": "advertise", "channels": [
+            {"id": 1, "topic": "/cmd", "encoding": "json", "schemaName": "hil.cmd"}]}))
+        await asyncio.sleep(0.2)
+        await self.ws.send(b"\x01" + struct.pack("<I", 1) + json.dumps(command).encode())
+
+
+def test_a_viewer_sees_the_speed_follow_the_reference_and_changes_it(tmp_path):
+    port = free_port()
+    serve = subprocess.Popen([sys.executable, "-m", "hil.cli.main", "serve", "--link", "stub",
+                              "--enable", "--speed-rpm", "1500", "--modbus", "off",
+                              "--duration", "12", "--pace", "realtime",
+                              "--live", f"127.0.0.1:{port}"],
+                             cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        async def session():
+            deadline = time.monotonic() + 20
+            while True:
+                try:
+                    ws = await websockets.connect(f"ws://127.0.0.1:{port}",
+                                                  subprotocols=[SUBPROTOCOL])
+                    break
+                except OSError:
+                    if time.monotonic() > deadline:
+                        raise
+                    await asyncio.sleep(0.2)
+            async with ws:
+                viewer = Viewer(ws)
+                await viewer.advertised({"/plant/truth", "/ctrl/telemetry", "/plant/sensors"})
+                assert viewer.channels["/plant/truth"]["schemaName"] == "hil.PlantTruth"
+                await viewer.subscribe(["/plant/truth", "/ctrl/telemetry"])
+                await viewer.messages(1.5)                           # reach 1500 rpm
+                got = await viewer.messages(1.0)
+                speeds = [m.speed_rpm for t, m in got if t == "/plant/truth"]
+                telemetry = [m for t, m in got if t == "/ctrl/telemetry"]
+                # 1 kHz of simulated time, paced to real time: about 1000 rows a second
+                assert 500 < len(speeds) < 1500 and telemetry
+                assert abs(sum(speeds) / len(speeds) - 1500) < 30
+                await viewer.publish_command({"speed_ref_rpm": 2500})
+                await viewer.messages(1.5)
+                got = await viewer.messages(1.0)
+                speeds = [m.speed_rpm for t, m in got if t == "/plant/truth"]
+                assert abs(sum(speeds) / len(speeds) - 2500) < 50
+        asyncio.run(asyncio.wait_for(session(), 60))
+    finally:
+        serve.terminate()
+        out, err = serve.communicate(timeout=20)
+    assert f"live (Foxglove) on ws://127.0.0.1:{port}" in err
+
+
+def test_bad_live_commands_are_refused_by_name():
+    from hil.live.stream import LiveStream
+
+    stream = LiveStream("127.0.0.1", 0, period_s=50e-6)
+    try:
+        stream._command(b'{"speed_ref_rmp": 100}')
+        stream._command(b"[1, 2]")
+        stream._command(b'{"speed_ref_rpm": 100}')
+        assert stream.take_commands() == [{"speed_ref_rpm": 100.0}]
+        assert "unknown key 'speed_ref_rmp'" in stream.errors[0]
+        assert "expected a JSON object" in stream.errors[1]
+    finally:
+        stream.close()
