@@ -139,3 +139,34 @@ def test_bad_live_commands_are_refused_by_name():
         assert "expected a JSON object" in stream.errors[1]
     finally:
         stream.close()
+
+
+def test_hil_run_hands_every_nth_period_to_the_live_stream():
+    """`hil run --live` gives the runner a LiveStream; the recorder hands it every `every`-th
+    period's truth and telemetry (here a stand-in that counts, 1 kHz at 50 us = every 20th)."""
+    from hil.plans.format import load_plan
+    from hil.run.runner import run_plan
+
+    class Counting:
+        every = 20
+
+        def __init__(self):
+            self.periods, self.telemetry = [], []
+
+        def follow(self, period_s):
+            return self
+
+        def period(self, k, truth, sample):
+            self.periods.append(k)
+
+        def telemetry_row(self, row):
+            self.telemetry.append(row[0])
+
+    sink = Counting()
+    plan = load_plan(REPO / "test_plans" / "01_speed_step_sensored.yaml")
+    result, _ = run_plan(plan, live=sink)
+    assert result.outcome.value == "PASS"
+    n = round(result.sim_duration_s / 50e-6)
+    assert sink.periods and all(k % 20 == 0 for k in sink.periods)
+    assert abs(len(sink.periods) - n / 20) <= 2
+    assert set(sink.telemetry) <= set(sink.periods) and len(sink.telemetry) >= len(sink.periods) - 2

@@ -33,6 +33,8 @@ def _parser() -> argparse.ArgumentParser:
                           "paper-hardware, or a YAML path) instead of the plans' own profiles")
     run.add_argument("--modbus", metavar="[HOST:]PORT", help="serve the Modbus control port while running")
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
+    run.add_argument("--live", metavar="[HOST:]PORT", nargs="?", const="127.0.0.1:8765",
+                     help="Foxglove WebSocket server while the plans run (default 127.0.0.1:8765)")
 
     serve = sub.add_parser("serve", help="run the plant alone for an external board",
                            description="Run the plant in lockstep against a board until Ctrl-C (or "

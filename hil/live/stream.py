@@ -128,6 +128,13 @@ class LiveStream:
             server_listener=_Listener(self), message_backlog_size=1024)
         self.host, self.port = host, self.server.port
 
+    def follow(self, period_s: float) -> "LiveStream":
+        """The next session's control period (one server serves every plan of a `hil run`)."""
+        rate_hz = 1.0 / (self.every * self.period_s)
+        self.period_s = period_s
+        self.every = max(1, round(1.0 / (rate_hz * period_s)))
+        return self
+
     @property
     def url(self) -> str:
         return f"ws://{self.host}:{self.port}"

@@ -193,6 +193,7 @@ class RunOptions:
     log: bool = True
     reports: bool = True            # False: only the MCAP log goes into out_dir (hil sweep)
     profile: Any = None             # a name, a path or a ProfileRef; None: the plan's first
+    live: Any = None                # hil.live.LiveStream: the run's channels to live viewers
 
 
 @dataclass
@@ -205,12 +206,12 @@ class _RunState:
 def run_plan(plan: Plan, link: str | None = None, mode: str | None = None,
              out_dir: Path | None = None, seed: int = 0, progress=None,
              modbus: tuple[str, int] | None = None,
-             reports: bool = True, profile=None) -> tuple[PlanResult, SignalSet]:
+             reports: bool = True, profile=None, live=None) -> tuple[PlanResult, SignalSet]:
     """Runs one plan on one profile (default: the plan's first); writes log and (unless
     reports=False) reports into out_dir/<plan_dir_name> when given. Never raises for a
     failing board or plan: the outcome says what happened."""
     opts = RunOptions(link=link, mode=mode, out_dir=out_dir, seed=seed, progress=progress,
-                      modbus=modbus, reports=reports, profile=profile)
+                      modbus=modbus, reports=reports, profile=profile, live=live)
     return _run(plan, opts)
 
 
@@ -239,6 +240,8 @@ def _run(plan: Plan, opts: RunOptions) -> tuple[PlanResult, SignalSet]:
         stimuli = Stimuli(session)
         session.on_period = stimuli
         session.start()
+        if opts.live is not None:
+            session.recorder.live = opts.live.follow(session.period_s)
         if opts.modbus is not None:
             from hil.faults.injector import MODBUS_BIT_MASK, apply_fault_bits
             from hil.ports.modbus import ControlMailbox, ModbusPort
@@ -456,6 +459,13 @@ def run_command(args) -> int:
         return 2
     plans = [load_plan(f) for f in files]  # validate every plan before anything runs
     modbus = parse_host_port(args.modbus) if args.modbus else None
+    live = None
+    if getattr(args, "live", None):
+        from hil.live import LiveStream, parse_live_address
+
+        live_host, live_port = parse_live_address(args.live)
+        live = LiveStream(live_host, live_port, period_s=50e-6, mode=args.mode or "lockstep")
+        print(f"hil run: live (Foxglove) on {live.url}", file=sys.stderr)
     out = Path(args.out)
     try:
         out.mkdir(parents=True, exist_ok=True)
@@ -481,7 +491,7 @@ def run_command(args) -> int:
                 callback = lambda done, total, task=task: bar.update(task, completed=done)
             result, _signals = run_plan(plan, link=args.link, mode=args.mode, out_dir=out,
                                         seed=args.seed, progress=callback, modbus=modbus,
-                                        profile=ref)
+                                        profile=ref, live=live)
             plan_dir = out / plan_dir_name(plan, ref)
             entries.append((result, {"dir": plan_dir, "html": plan_dir / "report.html",
                                      "junit": plan_dir / "junit.xml", "json": plan_dir / "result.json",
@@ -501,6 +511,8 @@ def run_command(args) -> int:
     finally:
         if bar is not None:
             bar.stop()
+        if live is not None:
+            live.close()
         if entries:
             write_summary(entries, out)
             print(f"reports: {out / 'index.html'} (JUnit: {out / 'junit.xml'})")
