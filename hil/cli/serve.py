@@ -74,6 +74,31 @@ def _apply_live(session, live, apply_fault_bits) -> None:
     live.errors.clear()
 
 
+class _StatusLine:
+    """One line on a terminal, rewritten twice a second: speed, torque, DC link, faults, rate."""
+
+    def __init__(self, session):
+        from plant_rt import TRUTH_FIELDS
+
+        self.session = session
+        self.index = {name: i for i, name in enumerate(TRUTH_FIELDS)}
+        self.last = (time.monotonic(), 0)
+
+    def show(self, ran: int) -> None:
+        now = time.monotonic()
+        t0, n0 = self.last
+        if now - t0 < 0.5 or not self.session.recorder.truth_rows:
+            return
+        self.last = (now, ran)
+        row = self.session.recorder.truth_rows[-1]
+        f = self.index
+        faults = f"faults 0x{self.session.fault_bits:x}" if self.session.fault_bits else "no faults"
+        board = f", board FAULTs {len(self.session.faults)}" if self.session.faults else ""
+        print(f"\r{row[f['speed_rpm']]:8.1f} rpm {row[f['torque_nm']]:6.3f} N m "
+              f"{row[f['v_dc']]:5.1f} V  {faults}{board}  {(ran - n0) / (now - t0):8.0f} periods/s ",
+              end="", file=sys.stderr, flush=True)
+
+
 def _serve(args, profile, config, mailbox, port, live, chunk, total, pace) -> int:
     from hil.faults.injector import apply_fault_bits
 
@@ -91,8 +116,11 @@ def _serve(args, profile, config, mailbox, port, live, chunk, total, pace) -> in
               file=sys.stderr)
         ran = 0
         started = time.monotonic()
+        status = _StatusLine(session) if sys.stderr.isatty() else None
         try:
             while total is None or ran < total:
+                if status is not None:
+                    status.show(ran)
                 n = chunk if total is None else min(chunk, total - ran)
                 if live is not None:
                     _apply_live(session, live, apply_fault_bits)
@@ -108,6 +136,8 @@ def _serve(args, profile, config, mailbox, port, live, chunk, total, pace) -> in
             if port is not None:
                 port.stop()
         wall = time.monotonic() - started
+        if status is not None:
+            print(file=sys.stderr)             # leave the status line
         print(f"hil serve: {ran} periods ({ran * profile.control_period_s:.3f} s simulated) "
               f"in {wall:.2f} s wall", file=sys.stderr)
     return 0
