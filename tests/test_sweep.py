@@ -233,24 +233,32 @@ def test_resume_runs_only_what_is_missing(tmp_path):
 
 
 def test_lost_worker_run_is_recorded_not_missing(tmp_path):
-    """A local pool process that dies: the run is retried, then recorded lost (ERROR)."""
+    """A local pool process that dies: the run is retried, then recorded lost (ERROR); the runs
+    in flight beside it when the pool broke are run again and never charged for its crash
+    (with 8 runs on 2 workers some always share the pool with the dying one)."""
     from hil.sweep.executors import LocalExecutor
 
     rows = []
     tasks = [{"index": i, "plan_path": "p", "point": 0, "sample": i, "seed": i, "values": {},
-              "die": i == 1} for i in range(3)]
+              "die": i == 1} for i in range(8)]
     LocalExecutor(2, retries=1, stall_timeout_s=60, fn=_dies_on_flag).run(tasks, rows.append)
     by = {r["index"]: r for r in rows}
-    assert sorted(by) == [0, 1, 2] and len(rows) == 3
+    assert sorted(by) == list(range(8)) and len(rows) == 8
     assert by[1]["lost"] and by[1]["outcome"] == "ERROR" and "worker process died" in by[1]["reason"]
-    assert not by[0]["lost"] and not by[2]["lost"]
+    assert "gave up after 2 attempts" in by[1]["reason"]
+    assert [i for i, r in by.items() if r["lost"]] == [1]
 
 
 def _dies_on_flag(task):
+    """The flagged run kills its worker after 0.2 s; the others take 0.4 s, so some are always
+    in flight in the same pool when it dies."""
     import os
+    import time
 
     if task["die"]:
+        time.sleep(0.2)
         os._exit(3)
+    time.sleep(0.4)
     return {"index": task["index"], "outcome": "PASS", "lost": False}
 
 

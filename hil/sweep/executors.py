@@ -46,10 +46,18 @@ class LocalExecutor:
         return f"{self.workers} local process{'es' if self.workers > 1 else ''}"
 
     def run(self, tasks: Iterable[dict], on_row: Callable[[dict], None]) -> None:
+        """Runs the tasks on a process pool. A worker that dies breaks the whole pool, and the
+        pool cannot say which task killed it: every task in flight then becomes a suspect and
+        runs again alone, where only the one that kills its worker is charged an attempt (an
+        innocent run never loses a retry to another's crash)."""
         pending = list(tasks)[::-1]          # pop() takes them in index order
+        suspects: list[dict] = []
         attempts: dict[int, int] = {}
         ctx = multiprocessing.get_context("spawn")
-        while pending:
+        while pending or suspects:
+            if suspects:
+                self._run_alone(suspects.pop(), attempts, suspects, on_row, ctx)
+                continue
             pool = cf.ProcessPoolExecutor(self.workers, mp_context=ctx)
             in_flight: dict[cf.Future, dict] = {}
             broken = False
@@ -72,15 +80,35 @@ class LocalExecutor:
                             on_row(fut.result())
                         except cf.process.BrokenProcessPool:
                             broken = True
-                            self._retry(task, attempts, pending, on_row, "a worker process died")
+                            suspects.append(task)
                         except Exception as exc:  # noqa: BLE001 - the worker failed, not the plan
                             self._retry(task, attempts, pending, on_row, f"{type(exc).__name__}: {exc}")
                 if broken:
-                    for fut, task in list(in_flight.items()):
-                        self._retry(task, attempts, pending, on_row, "a worker process died")
+                    suspects.extend(in_flight.values())
                     in_flight.clear()
             finally:
                 pool.shutdown(wait=not broken, cancel_futures=True)
+
+    def _run_alone(self, task, attempts, suspects, on_row, ctx) -> None:
+        """One task on a pool of its own: if its worker dies now, the task killed it."""
+        pool = cf.ProcessPoolExecutor(1, mp_context=ctx)
+        broken = False
+        try:
+            fut = pool.submit(self.fn, task)
+            done, _ = cf.wait([fut], timeout=self.stall_timeout_s)
+            if not done:
+                broken = True
+                on_row(lost_row(task, f"no result within {self.stall_timeout_s:g} s"))
+                return
+            try:
+                on_row(fut.result())
+            except cf.process.BrokenProcessPool:
+                broken = True
+                self._retry(task, attempts, suspects, on_row, "a worker process died")
+            except Exception as exc:  # noqa: BLE001
+                self._retry(task, attempts, suspects, on_row, f"{type(exc).__name__}: {exc}")
+        finally:
+            pool.shutdown(wait=not broken, cancel_futures=True)
 
     def _retry(self, task, attempts, pending, on_row, reason):
         n = attempts[task["index"]] = attempts.get(task["index"], 0) + 1
