@@ -112,6 +112,9 @@ class BenchSession:
         self.board_params: dict[str, float] = {}
         self.faults: list[Fault] = []
         self.events: list[tuple[float, str, dict]] = []
+        #: Called as fn(t_s, kind, data) for every event as it is recorded (the console, a
+        #: live view). A listener must be quick: it runs inside the period loop.
+        self.event_listeners: list = []
         self.missed_answers = 0
         self.policy = _policy(profile, self.config)
         self.hello_wait_s = self.policy.hello_wait_s
@@ -389,6 +392,8 @@ class BenchSession:
     def _event(self, kind: str, data: dict) -> None:
         t = self.plant.period * self.period_s
         self.events.append((t, kind, data))
+        for listener in self.event_listeners:
+            listener(t, kind, data)
         if self.log is not None:
             self.log.write_json("/plan/events", round(t * 1e9), {"t_s": t, "kind": kind, **_jsonable(data)})
 
