@@ -29,6 +29,7 @@ from hil.run.runner import skipped_remainder
 from hil.plans.format import (CheckStep, CommandStep, DcLinkStep, LoadStep, MarkStep, ParamSetStep, Plan, RunStep,
                       WaitUntilStep, load_plan, parse_plan)
 from hil.reports.html import junit_xml, slug, write_reports, write_summary
+from hil.reports.svg import polyline_points
 from hil.plans.signals import Signal, SignalSet
 
 pytest_plugins = ["pytester"]
@@ -246,10 +247,12 @@ def test_html_report_is_self_contained_with_plots(paper_step_run, tmp_path):
     paths = write_reports(result, signals, tmp_path / "out", plan=plan)
     html = paths["html"].read_text()
     assert "<link" not in html and "<script" not in html and "http://" not in html.split("</style>")[0]
-    images = html.count('src="data:image/png;base64,')
+    images = html.count('src="data:image/svg+xml;base64,')
     assert images == len(plan.checks) + len(plan.plots)
-    first = html.split('src="data:image/png;base64,', 1)[1].split('"', 1)[0]
-    assert base64.b64decode(first)[:8] == b"\x89PNG\r\n\x1a\n"
+    first = html.split('src="data:image/svg+xml;base64,', 1)[1].split('"', 1)[0]
+    svg = ET.fromstring(base64.b64decode(first))                # a well-formed SVG document
+    assert svg.tag == "{http://www.w3.org/2000/svg}svg"
+    assert len(polyline_points(base64.b64decode(first).decode())[0]) > 100
     for c in plan.checks:
         assert c.name in html
     assert "Speed (Fig. 4a / 6a)" in html and "1500 to 3000 rpm" in html
@@ -259,7 +262,7 @@ def test_html_report_is_self_contained_with_plots(paper_step_run, tmp_path):
 def test_report_reloads_plots_from_the_source_and_summary_links(paper_step_run, tmp_path):
     plan, result, signals = paper_step_run
     paths = write_reports(result, signals, tmp_path / slug(plan.name))   # plan=None: reloads the plots
-    assert paths["html"].read_text().count("data:image/png") == len(plan.checks) + len(plan.plots)
+    assert paths["html"].read_text().count("data:image/svg+xml") == len(plan.checks) + len(plan.plots)
     other = PlanResult("second", "x.yaml", Outcome.ABORTED, "interrupted (Ctrl-C)")
     summary = write_summary([(result, paths), (other, {})], tmp_path)
     index = summary["html"].read_text()

@@ -7,8 +7,8 @@
   a note); a plan that ended in ERROR, TIMEOUT or ABORTED adds an error
   testcase carrying the reason. Valid against the Jenkins junit-10.xsd
   (tests/data/junit-10.xsd).
-- ``report.html``: one file with inline CSS and PNG plots as base64 data
-  URIs (matplotlib's Agg canvas, no pyplot state): the plan, its verdicts,
+- ``report.html``: one file with inline CSS and SVG plots as base64 data
+  URIs (hil/reports/svg.py, drawn in milliseconds): the plan, its verdicts,
   measured values against limits, a plot of each check's window with its
   limits drawn, and the figures the plan's ``plots:`` section asks for.
 - ``result.json``: PlanResult.to_json(), plain data for other tools.
@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import base64
 import html
-import io
 import json
 import math
 import re
@@ -34,6 +33,7 @@ from hil.plans.limits import Limits
 from hil.plans.outcome import CheckResult, Outcome, PlanResult
 from hil.plans.signals import SignalSet
 from hil.plans.units import compatible, convert, is_angle
+from hil.reports.svg import Figure
 
 MAX_PLOT_POINTS = 4000
 _COLORS = {"PASS": "#1a7f37", "MARGINAL": "#9a6700", "FAIL": "#cf222e", "ERROR": "#8250df",
@@ -171,27 +171,9 @@ def _decimate(t: np.ndarray, y: np.ndarray, max_points: int = MAX_PLOT_POINTS) -
     return np.concatenate([tt, t[m:]]), np.concatenate([yy, y[m:]])
 
 
-def _png(fig) -> str:
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-
-    FigureCanvasAgg(fig)
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=90)
-    return base64.b64encode(buf.getvalue()).decode("ascii")
-
-
-def _new_figure(width: float = 7.5, height: float = 3.0):
-    # matplotlib is imported when a figure is drawn, not when the module is (0.3 s of every
-    # `hil run` start-up otherwise, and sweeps start thousands of runs).
-    from matplotlib.figure import Figure
-
-    # Fixed margins: matplotlib's constrained layout draws every artist an extra
-    # time to measure it, which doubled the cost of a report.
-    fig = Figure(figsize=(width, height))
-    left, bottom = 0.75 / width, 0.5 / height
-    fig.subplots_adjust(left=left, right=1 - 0.15 / width, bottom=bottom, top=1 - 0.35 / height,
-                        wspace=0.3)
-    return fig
+def _encoded(fig: Figure, alt: str) -> str:
+    """The figure as a base64 SVG document for an <img> data URI."""
+    return base64.b64encode(fig.svg(alt).encode("utf-8")).decode("ascii")
 
 
 def _hline_limits(ax, limits: Limits | None, unit: str) -> None:
@@ -208,15 +190,6 @@ def _hline_limits(ax, limits: Limits | None, unit: str) -> None:
                        label="marginal")
 
 
-def _dedupe_legend(ax) -> None:
-    handles, labels = ax.get_legend_handles_labels()
-    seen: dict[str, object] = {}
-    for h, lab in zip(handles, labels):
-        seen.setdefault(lab, h)
-    if seen:
-        ax.legend(list(seen.values()), list(seen), fontsize=7, loc="best")
-
-
 def _plot_window(c: CheckResult) -> tuple[float, float]:
     """The check's window with 10 % of context either side."""
     t0, t1 = c.window
@@ -225,7 +198,7 @@ def _plot_window(c: CheckResult) -> tuple[float, float]:
 
 
 def check_figure(c: CheckResult, signals: SignalSet) -> str | None:
-    """A base64 PNG of a check's window with its limits, or None when there is nothing to plot."""
+    """A base64 SVG of a check's window with its limits, or None when there is nothing to plot."""
     if c.window is None or not c.signals or any(n not in signals for n in c.signals):
         return None
     if c.kind == "circularity":
@@ -233,8 +206,8 @@ def check_figure(c: CheckResult, signals: SignalSet) -> str | None:
     a, b = _plot_window(c)
     main = signals[c.signals[0]]
     unit = main.unit
-    fig = _new_figure()
-    ax = fig.add_subplot(1, 2 if c.kind == "thd" else 1, 1)
+    fig = Figure(ncols=2 if c.kind == "thd" else 1)
+    ax = fig.axes[0]
     for name in c.signals:
         s = signals[name]
         if not compatible(s.unit, unit):
@@ -281,24 +254,24 @@ def check_figure(c: CheckResult, signals: SignalSet) -> str | None:
     ax.set_xlabel("t (s)")
     ax.set_ylabel(unit)
     ax.grid(True, lw=0.3)
-    _dedupe_legend(ax)
+    ax.legend()
     if c.kind == "thd" and "harmonic_amplitudes" in d:
-        ax2 = fig.add_subplot(1, 2, 2)
+        ax2 = fig.axes[1]
         amps = np.asarray(d["harmonic_amplitudes"], dtype=float)
         ax2.bar(np.arange(1, len(amps) + 1), amps / amps[0] * 100.0, color="#0969da")
         ax2.set_yscale("log")
         ax2.set_xlabel("harmonic")
         ax2.set_ylabel("% of fundamental")
         ax2.grid(True, lw=0.3)
-    fig.suptitle(f"{c.name} [{c.outcome.value}]", fontsize=9, color=_COLORS.get(c.outcome.value))
-    return _png(fig)
+    fig.suptitle(f"{c.name} [{c.outcome.value}]", color=_COLORS.get(c.outcome.value))
+    return _encoded(fig, c.name)
 
 
 def _locus_check_figure(c: CheckResult, signals: SignalSet) -> str:
     x = signals[c.signals[0]].window(*c.window)
     y = signals[c.signals[1]].window(*c.window).to_unit(x.unit)
-    fig = _new_figure(4.2, 4.0)
-    ax = fig.add_subplot(1, 1, 1)
+    fig = Figure(4.2, 4.0)
+    ax = fig.axes[0]
     xs, ys = x.values, y.resampled(x.t_s)
     ax.plot(xs, ys, lw=0.6, label="locus")
     d = c.details
@@ -317,13 +290,13 @@ def _locus_check_figure(c: CheckResult, signals: SignalSet) -> str:
     ax.set_xlabel(f"{x.name} ({x.unit})")
     ax.set_ylabel(f"{y.name} ({y.unit})")
     ax.grid(True, lw=0.3)
-    _dedupe_legend(ax)
-    fig.suptitle(f"{c.name} [{c.outcome.value}]", fontsize=9, color=_COLORS.get(c.outcome.value))
-    return _png(fig)
+    ax.legend()
+    fig.suptitle(f"{c.name} [{c.outcome.value}]", color=_COLORS.get(c.outcome.value))
+    return _encoded(fig, c.name)
 
 
 def plan_figure(spec, signals: SignalSet, marks: Mapping[str, float], end_s: float) -> str | None:
-    """A base64 PNG for one entry of a plan's ``plots:`` section (hil.plan.PlotSpec)."""
+    """A base64 SVG for one entry of a plan's ``plots:`` section (hil.plan.PlotSpec)."""
     present = [n for n in spec.signals if n in signals]
     if not present or (spec.type == "xy" and len(present) < 2):
         return None
@@ -337,15 +310,15 @@ def plan_figure(spec, signals: SignalSet, marks: Mapping[str, float], end_s: flo
     if spec.type == "xy":
         x = signals[spec.signals[0]].window(a, b)
         y = signals[spec.signals[1]].window(a, b).to_unit(x.unit)
-        fig = _new_figure(4.2, 4.0)
-        ax = fig.add_subplot(1, 1, 1)
+        fig = Figure(4.2, 4.0)
+        ax = fig.axes[0]
         ax.plot(x.values, y.resampled(x.t_s), lw=0.6)
         ax.set_aspect("equal")
         ax.set_xlabel(f"{x.name} ({x.unit})")
         ax.set_ylabel(f"{y.name} ({y.unit})")
     else:
-        fig = _new_figure()
-        ax = fig.add_subplot(1, 1, 1)
+        fig = Figure()
+        ax = fig.axes[0]
         units = set()
         for name in present:
             s = signals[name].window(a, b)
@@ -359,15 +332,14 @@ def plan_figure(spec, signals: SignalSet, marks: Mapping[str, float], end_s: flo
         for mark, t_mark in marks.items():
             if a <= t_mark <= b and mark != "start":
                 ax.axvline(t_mark, color="#57606a", lw=0.6, ls=":")
-                ax.annotate(mark, (t_mark, 1.0), xycoords=("data", "axes fraction"), fontsize=7,
-                            rotation=90, va="top", ha="right", color="#57606a")
+                ax.annotate_mark(mark, t_mark)
         ax.set_xlabel("t (s)")
         ax.set_ylabel(", ".join(sorted(units)))
         if len(present) > 1:
-            ax.legend(fontsize=7, loc="best")
+            ax.legend()
     ax.grid(True, lw=0.3)
-    fig.suptitle(spec.title, fontsize=9)
-    return _png(fig)
+    fig.suptitle(spec.title)
+    return _encoded(fig, spec.title)
 
 
 # --------------------------------------------------------------------------- #
@@ -403,7 +375,7 @@ def _fmt(value: float | None) -> str:
 def _img(b64: str | None, alt: str) -> str:
     if b64 is None:
         return '<p class="muted">(no plot: the data is not available)</p>'
-    return f'<img alt="{html.escape(alt)}" src="data:image/png;base64,{b64}">'
+    return f'<img alt="{html.escape(alt)}" src="data:image/svg+xml;base64,{b64}">'
 
 
 def html_report(result: PlanResult, signals: SignalSet, plots: Sequence = ()) -> str:
