@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import math
+import xml.etree.ElementTree as ET
 import textwrap
 from pathlib import Path
 
@@ -167,6 +168,27 @@ def test_summary_against_hand_made_table():
     assert d[0]["rho_value"] == pytest.approx(1.0)
     assert d[0]["rho_fail"] == pytest.approx(0.696311, abs=1e-6)
     assert [x["parameter"] for x in d] == ["x", "z"]
+
+
+def test_a_finding_is_summarised_by_its_values_not_counted_as_unevaluated(tmp_path):
+    """A check with role finding (outcome INFO in every run) has no yield; its five values
+    3, 1, 4, 1, 5 give min 1, median 3, max 5 and a Spearman rho against x of
+    4 / sqrt(10 * 9.5) by hand (ranks of y 3, 1.5, 4, 1.5, 5 against 1..5: deviations
+    products sum to 4, squares to 10 and 9.5), and no rho_fail."""
+    rows = [{"index": i, "plan": "p", "outcome": "PASS", "params": {"x": float(i)},
+             "checks": [{"name": "ratio", "outcome": "INFO", "measured": v, "unit": "1"}]}
+            for i, v in enumerate([3.0, 1.0, 4.0, 1.0, 5.0])]
+    (c,) = summarize(rows, ["x"])["checks"]
+    assert c["finding"] and c["measured_runs"] == 5 and c["evaluated"] == 0
+    assert c["not_evaluated"] == {}
+    assert (c["min"], c["median"], c["max"]) == (1.0, 3.0, 5.0)
+    (d,) = c["drivers"]
+    assert d["rho_value"] == pytest.approx(4.0 / math.sqrt(10.0 * 9.5), abs=1e-9)
+    assert d["rho_fail"] is None
+    path = write_junit({"name": "s"}, summarize(rows, ["x"]), tmp_path)
+    case = ET.parse(path).getroot().find(".//testcase")
+    assert case.find("failure") is None and case.find("error") is None
+    assert "finding, measured in 5 run(s): min / median / max 1 / 3 / 5" in case.find("system-out").text
 
 
 def test_junit_one_case_per_check(tmp_path):

@@ -75,8 +75,14 @@ def write_html(sweep_info: dict, summary: dict, rows: list[dict], out: Path) -> 
         drv = "-" if d is None else (f"{e(d['parameter'])} ({_num(d['rho_value'])}, {_num(d['rho_fail'])})")
         fr = ", ".join(map(str, c["failed_runs"][:12])) + (" ..." if len(c["failed_runs"]) > 12 else "")
         cls = " class='bad'" if c["failed"] else ""
-        parts.append(f"<tr{cls}><td>{e(str(c['plan']))}</td><td>{e(c['check'])}</td><td>{c['evaluated']}</td>"
-                     f"<td>{_pct(c['yield'])}</td><td>{_pct(c['ci_low'])} - {_pct(c['ci_high'])}</td>"
+        if c.get("finding"):
+            counted, share = f"{c['measured_runs']} measured", "finding"
+            interval = "(cannot fail)"
+        else:
+            counted, share = str(c["evaluated"]), _pct(c["yield"])
+            interval = f"{_pct(c['ci_low'])} - {_pct(c['ci_high'])}"
+        parts.append(f"<tr{cls}><td>{e(str(c['plan']))}</td><td>{e(c['check'])}</td><td>{counted}</td>"
+                     f"<td>{share}</td><td>{interval}</td>"
                      f"<td>{_num(c['min'])} / {_num(c['median'])} / {_num(c['max'])} {e(c['unit'])}</td>"
                      f"<td>{drv}</td><td>{fr}</td></tr>")
     parts.append("</table><h2>Worst checks against their strongest parameter</h2>"
@@ -106,6 +112,9 @@ def write_junit(sweep_info: dict, summary: dict, out: Path) -> Path:
                                  name=c["check"])
             text = (f"yield {c['passed']}/{c['evaluated']} ({_pct(c['yield'])}, 95 % CI "
                     f"{_pct(c['ci_low'])} - {_pct(c['ci_high'])})")
+            if c.get("finding"):
+                text = (f"finding, measured in {c['measured_runs']} run(s): min / median / max "
+                        f"{_num(c['min'])} / {_num(c['median'])} / {_num(c['max'])} {c['unit']}")
             if c["failed"]:
                 ET.SubElement(case, "failure", message=text).text = (
                     f"{text}; failed runs: {', '.join(map(str, c['failed_runs']))}")

@@ -3,7 +3,9 @@
 - Yield of a plan: runs that PASSed (MARGINAL counts as pass) over the runs with a verdict;
   lost runs (no result: the executor gave up) are counted apart, never as failures.
 - Yield of a check: runs where it passed over the runs where it was evaluated (PASS,
-  MARGINAL or FAIL; ERROR and SKIPPED are counted apart).
+  MARGINAL or FAIL; ERROR and SKIPPED are counted apart). A finding (a check that informs and
+  cannot fail, outcome INFO) has no yield: its measured values, their spread and the
+  parameters that drive them are the result, over the runs that measured it.
 - Wilson score interval at 95 % (z = 1.959964): right at 0 % and 100 %, where the normal
   approximation collapses to a zero-width interval.
 - Drivers: for every check and every numeric parameter, Spearman's rank correlation of the
@@ -104,20 +106,24 @@ def summarize(rows: list[dict], parameters: list[str]) -> dict:
                 if c is not None:
                     entries.append((r, c))
             ev = [(r, c) for r, c in entries if c["outcome"] in EVALUATED]
+            found = [(r, c) for r, c in entries if c["outcome"] == "INFO"]
+            finding = bool(found) and not ev
             kc = sum(1 for _, c in ev if c["outcome"] in PASSING)
             nc = len(ev)
             lo, hi = wilson(kc, nc)
-            measured = [c["measured"] for _, c in ev if c["measured"] is not None]
+            scored = found if finding else ev       # the runs whose values are summarised
+            measured = [c["measured"] for _, c in scored if c["measured"] is not None]
             failed_runs = sorted(r["index"] for r, c in ev if c["outcome"] == "FAIL")
             drivers = []
             for p in parameters:
-                xs = [_numeric(r["params"].get(p)) for r, _ in ev]
+                xs = [_numeric(r["params"].get(p)) for r, _ in scored]
                 if all(x is None for x in xs):
                     continue
                 xs = [math.nan if x is None else x for x in xs]
-                ys = [math.nan if c["measured"] is None else c["measured"] for _, c in ev]
-                fs = [0.0 if c["outcome"] in PASSING else 1.0 for _, c in ev]
-                rho_v, rho_f = spearman(xs, ys), spearman(xs, fs)
+                ys = [math.nan if c["measured"] is None else c["measured"] for _, c in scored]
+                fs = [0.0 if c["outcome"] in PASSING else 1.0 for _, c in scored]
+                rho_v = spearman(xs, ys)
+                rho_f = None if finding else spearman(xs, fs)
                 if rho_v is None and rho_f is None:
                     continue
                 drivers.append({"parameter": p, "rho_value": rho_v, "rho_fail": rho_f})
@@ -126,10 +132,11 @@ def summarize(rows: list[dict], parameters: list[str]) -> dict:
             unit = next((c["unit"] for _, c in entries), "")
             other: dict[str, int] = defaultdict(int)
             for _, c in entries:
-                if c["outcome"] not in EVALUATED:
+                if c["outcome"] not in EVALUATED and not (finding and c["outcome"] == "INFO"):
                     other[c["outcome"]] += 1
             checks[(plan, name)] = {
                 "plan": plan, "check": name, "unit": unit, "evaluated": nc, "passed": kc,
+                "finding": finding, "measured_runs": len(scored),
                 "failed": nc - kc, "not_evaluated": dict(other),
                 "yield": kc / nc if nc else math.nan, "ci_low": lo, "ci_high": hi,
                 "min": min(measured) if measured else None,
