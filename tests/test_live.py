@@ -170,3 +170,54 @@ def test_hil_run_hands_every_nth_period_to_the_live_stream():
     assert sink.periods and all(k % 20 == 0 for k in sink.periods)
     assert abs(len(sink.periods) - n / 20) <= 2
     assert set(sink.telemetry) <= set(sink.periods) and len(sink.telemetry) >= len(sink.periods) - 2
+
+
+def test_rows_reach_the_server_in_batches_and_only_for_subscribed_channels():
+    """What keeps a viewer's cost off the period loop (python -m bench live measures it): the
+    stream hands rows to the server FLUSH_ROWS at a time, so one wake of the server's thread
+    carries a batch, and packs nothing for a channel no viewer subscribes to. Counted with the
+    channels' log calls stood in for; a stream that logged row by row, or logged to channels
+    nobody watches, fails here."""
+    from types import SimpleNamespace
+
+    from hil.live.stream import FLUSH_ROWS, LiveStream
+
+    stream = LiveStream("127.0.0.1", 0, period_s=50e-6)
+    calls: list[tuple[str, int]] = []
+    batches_seen: list[int] = []
+    try:
+        for topic in (stream.truth, stream.sensors, stream.telemetry):
+            topic.log = lambda t_ns, values, name=topic.channel.topic(): calls.append((name, t_ns))
+        sample = SimpleNamespace(adc_i1=1, adc_i2=2, adc_vdc=3, encoder=4, status=0)
+        truth = tuple(0.0 for _ in range(len(stream.truth._args) // 2))
+
+        def hand_over(rows: int, first: int) -> None:
+            for k in range(first, first + rows):
+                stream.period(k * stream.every, truth, sample)
+                stream.telemetry_row((k * stream.every,) + (0,) * 3 + (0.0,) * 8)
+                batches_seen.append(len(calls))
+
+        hand_over(2 * FLUSH_ROWS, 0)
+        assert calls == [] and stream.flushes == 0          # nobody subscribed: nothing packed
+
+        async def watch_and_hand_over():
+            async with websockets.connect(f"ws://127.0.0.1:{stream.port}",
+                                          subprotocols=[SUBPROTOCOL]) as ws:
+                viewer = Viewer(ws)
+                await viewer.advertised({"/plant/truth", "/ctrl/telemetry", "/plant/sensors"})
+                await viewer.subscribe(["/plant/truth"])
+                deadline = time.monotonic() + 10
+                while not stream.truth.channel.has_sinks():
+                    assert time.monotonic() < deadline, "the subscription never arrived"
+                    await asyncio.sleep(0.02)
+                batches_seen.clear()
+                hand_over(2 * FLUSH_ROWS, 1000)
+
+        asyncio.run(asyncio.wait_for(watch_and_hand_over(), 30))
+        # Only /plant/truth is watched: its rows, in two batches of FLUSH_ROWS, in order.
+        assert {name for name, _ in calls} == {"/plant/truth"}
+        assert len(calls) == 2 * FLUSH_ROWS and stream.flushes == 2
+        assert [t for _, t in calls] == sorted(t for _, t in calls)
+        assert sorted(set(batches_seen)) == [0, FLUSH_ROWS, 2 * FLUSH_ROWS]   # whole batches only
+    finally:
+        stream.close()

@@ -23,11 +23,13 @@ from collections import deque
 from typing import Any
 
 import foxglove
-from foxglove.websocket import Capability
+from foxglove.websocket import Capability, ServerListener
 
 from hil.logs.mcap_writer import FIXED_TYPES, fixed_descriptor_set, tag_varint
 
 COMMAND_TOPIC = "/cmd"
+#: Rows (periods handed over by the recorder) given to the server at once; see the module doc.
+FLUSH_ROWS = 16
 COMMAND_KEYS = {"speed_ref_rpm": float, "enable": bool, "load_torque_nm": float,
                 "fault_bits": int, "speed_source": str}
 
@@ -74,8 +76,9 @@ class _FixedTopic:
         self.channel.log(self._struct.pack(*args), log_time=log_time_ns)
 
 
-class _Listener:
-    """Collects what viewers publish on /cmd; everything else is ignored."""
+class _Listener(ServerListener):
+    """Collects what viewers publish on /cmd; everything else is ignored (the base class's
+    no-op callbacks: without them the server prints 'Callback failed' on each subscribe)."""
 
     def __init__(self, stream: "LiveStream"):
         self._stream = stream
@@ -104,6 +107,11 @@ class LiveStream:
         self.every = max(1, round(1.0 / (rate_hz * period_s)))
         self.period_s = period_s
         self.errors: list[str] = []
+        # (log time ns, values) per channel, oldest first, until the next flush
+        self._truth_rows: list[tuple] = []
+        self._sensor_rows: list[tuple] = []
+        self._telemetry_rows: list[tuple] = []
+        self.flushes = 0                     # batches handed to the server (tests count them)
         self._commands: deque[dict[str, Any]] = deque()
         self._lock = threading.Lock()
         self._context = foxglove.Context()
@@ -130,6 +138,7 @@ class LiveStream:
 
     def follow(self, period_s: float) -> "LiveStream":
         """The next session's control period (one server serves every plan of a `hil run`)."""
+        self.flush()                         # the last plan's tail goes out before the next
         rate_hz = 1.0 / (self.every * self.period_s)
         self.period_s = period_s
         self.every = max(1, round(1.0 / (rate_hz * period_s)))
@@ -142,12 +151,29 @@ class LiveStream:
     # ------------------------------------------------------------- from the recorder
     def period(self, k: int, truth: tuple, sample) -> None:
         t_ns = round(k * self.period_s * 1e9)
-        self.truth.log(t_ns, truth)
-        self.sensors.log(t_ns, (k, sample.adc_i1, sample.adc_i2, sample.adc_vdc, sample.encoder,
-                                sample.status))
+        self._truth_rows.append((t_ns, truth))
+        self._sensor_rows.append((t_ns, (k, sample.adc_i1, sample.adc_i2, sample.adc_vdc,
+                                         sample.encoder, sample.status)))
+        if len(self._truth_rows) >= FLUSH_ROWS:
+            self.flush()
 
     def telemetry_row(self, row: tuple) -> None:
-        self.telemetry.log(round(row[0] * self.period_s * 1e9), row)
+        self._telemetry_rows.append((round(row[0] * self.period_s * 1e9), row))
+
+    def flush(self) -> None:
+        """Hands every kept row to the server, back to back, channel by channel; the rows of
+        a channel no viewer subscribes to are dropped here, before any packing."""
+        sent = 0
+        for topic, rows in ((self.truth, self._truth_rows), (self.sensors, self._sensor_rows),
+                            (self.telemetry, self._telemetry_rows)):
+            if rows and topic.channel.has_sinks():
+                log = topic.log
+                for t_ns, values in rows:
+                    log(t_ns, values)
+                sent += len(rows)
+            rows.clear()
+        if sent:
+            self.flushes += 1
 
     # ------------------------------------------------------------- from the viewers
     def _command(self, data: bytes) -> None:
@@ -174,4 +200,5 @@ class LiveStream:
         return out
 
     def close(self) -> None:
+        self.flush()
         self.server.stop()
