@@ -117,8 +117,16 @@ def _serve(args, profile, config, mailbox, port, live, chunk, total, pace) -> in
         ran = 0
         started = time.monotonic()
         status = _StatusLine(session) if sys.stderr.isatty() else None
+        from hil.run.console import EventConsole
+
+        # Notable events as they happen, rate-limited (hil/run/console.py); on a terminal the
+        # status line is wiped first so the event stays on a line of its own.
+        console = EventConsole(write=(lambda text: print(f"\r\033[K{text}", file=sys.stderr, flush=True))
+                               if status is not None else None)
+        session.event_listeners.append(console)
         try:
             while total is None or ran < total:
+                console.tick()
                 if status is not None:
                     status.show(ran)
                 n = chunk if total is None else min(chunk, total - ran)
@@ -133,6 +141,7 @@ def _serve(args, profile, config, mailbox, port, live, chunk, total, pace) -> in
         except KeyboardInterrupt:
             print("hil serve: stopping (Ctrl-C): plant safe-stated, log closed", file=sys.stderr)
         finally:
+            console.close()
             if port is not None:
                 port.stop()
         wall = time.monotonic() - started

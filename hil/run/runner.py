@@ -14,6 +14,7 @@ the ones never reached marked SKIPPED.
 from __future__ import annotations
 
 import datetime as _dt
+import functools
 import math
 import sys
 import time
@@ -194,6 +195,8 @@ class RunOptions:
     reports: bool = True            # False: only the MCAP log goes into out_dir (hil sweep)
     profile: Any = None             # a name, a path or a ProfileRef; None: the plan's first
     live: Any = None                # hil.live.LiveStream: the run's channels to live viewers
+    console: Any = None             # hil.run.console.EventConsole (any fn(t_s, kind, data))
+    on_step: Any = None             # callable(step) as each step starts (the progress line)
 
 
 @dataclass
@@ -206,12 +209,14 @@ class _RunState:
 def run_plan(plan: Plan, link: str | None = None, mode: str | None = None,
              out_dir: Path | None = None, seed: int = 0, progress=None,
              modbus: tuple[str, int] | None = None,
-             reports: bool = True, profile=None, live=None) -> tuple[PlanResult, SignalSet]:
+             reports: bool = True, profile=None, live=None, console=None,
+             on_step=None) -> tuple[PlanResult, SignalSet]:
     """Runs one plan on one profile (default: the plan's first); writes log and (unless
     reports=False) reports into out_dir/<plan_dir_name> when given. Never raises for a
     failing board or plan: the outcome says what happened."""
     opts = RunOptions(link=link, mode=mode, out_dir=out_dir, seed=seed, progress=progress,
-                      modbus=modbus, reports=reports, profile=profile, live=live)
+                      modbus=modbus, reports=reports, profile=profile, live=live,
+                      console=console, on_step=on_step)
     return _run(plan, opts)
 
 
@@ -237,6 +242,8 @@ def _run(plan: Plan, opts: RunOptions) -> tuple[PlanResult, SignalSet]:
                                metadata={"plan": {"name": plan.name, "source": str(plan.source_path),
                                                   "profile": ref.label}})
         session = BenchSession(profile, config)
+        if opts.console is not None:
+            session.event_listeners.append(opts.console)
         stimuli = Stimuli(session)
         session.on_period = stimuli
         session.start()
@@ -254,7 +261,7 @@ def _run(plan: Plan, opts: RunOptions) -> tuple[PlanResult, SignalSet]:
                               fault_bits_mask=MODBUS_BIT_MASK)
             port.start()
         deadline = None if plan.timeout_s is None else wall0 + plan.timeout_s
-        _execute(plan, session, stimuli, state, deadline, opts.progress)
+        _execute(plan, session, stimuli, state, deadline, opts.progress, opts.on_step)
         session.drain()
     except KeyboardInterrupt:
         aborted = "aborted by the user (Ctrl-C)"
@@ -317,7 +324,7 @@ def _run(plan: Plan, opts: RunOptions) -> tuple[PlanResult, SignalSet]:
 
 
 def _execute(plan: Plan, session: BenchSession, stimuli: Stimuli, state: _RunState,
-             deadline: float | None, progress) -> None:
+             deadline: float | None, progress, on_step=None) -> None:
     period = session.period_s
     total_s = plan.min_sim_duration_s()
     chunk = max(1, round(PROGRESS_CHUNK_S / period))
@@ -338,6 +345,8 @@ def _execute(plan: Plan, session: BenchSession, stimuli: Stimuli, state: _RunSta
         return done
 
     for step in plan.steps:
+        if on_step is not None:
+            on_step(step)
         t_start = session.plant.t_s
         outcome, message = Outcome.PASS, ""
         if isinstance(step, CommandStep):
@@ -441,13 +450,22 @@ class Bench:
 
 # --------------------------------------------------------------------------- CLI
 def _progress_bar(enabled: bool):
+    """rich's progress line per plan: plan [profile], step, simulated time, rate against real
+    time; None when disabled or stderr is not a terminal."""
     if not enabled or not sys.stderr.isatty():
         return None
+    from rich.console import Console
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
-    return Progress(TextColumn("{task.description}"), BarColumn(),
-                    TextColumn("{task.completed:.3f}/{task.total:.3f} s simulated"),
-                    TimeElapsedColumn(), transient=True)
+    return Progress(TextColumn("{task.description}"), TextColumn("{task.fields[step]}"),
+                    BarColumn(), TextColumn("{task.completed:.3f}/{task.total:.3f} s simulated"),
+                    TextColumn("{task.fields[rate]}"), TimeElapsedColumn(),
+                    console=Console(stderr=True), transient=True)
+
+
+def _step_text(step, plan) -> str:
+    where = f"line {step.line}" if getattr(step, "line", None) else ""
+    return f"step {step.index + 1}/{len(plan.steps)} {step.kind} {where}".rstrip()
 
 
 def run_command(args) -> int:
@@ -476,6 +494,11 @@ def run_command(args) -> int:
         raise OSError(f"--out directory '{out}' is not writable: {exc.strerror}") from None
     entries = []
     bar = _progress_bar(not args.no_progress)
+    from hil.run.console import EventConsole
+
+    # Events go through the progress bar's console while it is drawn (lines do not tear).
+    console = EventConsole(write=(lambda text: bar.console.print(text, markup=False, highlight=False))
+                           if bar is not None else None)
     exit_code = 0
     try:
         if bar is not None:
@@ -485,13 +508,25 @@ def run_command(args) -> int:
                 for ref in ([profile_ref(plan, str(wanted))] if wanted else
                             (plan.profiles or [profile_ref(plan)]))]
         for plan, ref in runs:
-            callback = None
+            on_step = None
+            wall0 = time.monotonic()
+
+            def callback(done, total, task=None):
+                console.tick()
+                if task is not None:
+                    elapsed = max(time.monotonic() - wall0, 1e-9)
+                    bar.update(task, completed=done, rate=f"{done / elapsed:.2f} x real time")
             if bar is not None:
-                task = bar.add_task(f"{plan.name} [{ref.label}]", total=plan.min_sim_duration_s())
-                callback = lambda done, total, task=task: bar.update(task, completed=done)
+                task = bar.add_task(f"{plan.name} [{ref.label}]", total=plan.min_sim_duration_s(),
+                                    step="", rate="")
+                callback = functools.partial(callback, task=task)
+                on_step = lambda step, task=task, plan=plan: bar.update(task, step=_step_text(step, plan))
             result, _signals = run_plan(plan, link=args.link, mode=args.mode, out_dir=out,
                                         seed=args.seed, progress=callback, modbus=modbus,
-                                        profile=ref, live=live)
+                                        profile=ref, live=live, console=console, on_step=on_step)
+            console.close()
+            if bar is not None:
+                bar.remove_task(task)          # its verdict line below says how it ended
             plan_dir = out / plan_dir_name(plan, ref)
             entries.append((result, {"dir": plan_dir, "html": plan_dir / "report.html",
                                      "junit": plan_dir / "junit.xml", "json": plan_dir / "result.json",

@@ -121,12 +121,15 @@ def run_realtime(session, count: int, stop: Callable[[], bool] | None = None,
         tick = clock()
         late_s = (tick - deadline) / 1e9
         lateness.append(late_s)
-        if late_s > period_s:
-            misses += 1
         sample = plant.sample()
         k = sample.period
+        if late_s > period_s:
+            misses += 1
+            # in the event list, the log and on the console (hil.run.console, rate-limited)
+            session.event("deadline_miss", period=k, late_us=late_s * 1e6)
         if k > 0 and answered_period < k - 1:
             missing += 1
+            session.event("missed", period=k - 1)     # no answer to the last SAMPLE by this tick
             why = watchdog.missed()
             if why is not None:
                 plant.safe_state()
