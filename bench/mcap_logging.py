@@ -26,6 +26,11 @@ Timed, each on a fresh log over the same rows, variants interleaved `repeats` ti
   JSON through `McapLog.write_json`.
 - ``read_s``: `log_summary` (what `hil log info` reads) and `read_log` of every channel on
   the default variant's file.
+- ``foxglove_sdk_writer``: the same full-rate rows (truth, sensors, telemetry; not the frame
+  captures) through foxglove-sdk's own MCAP writer (`foxglove.open_mcap`, lz4, 64 KiB chunks,
+  CRCs on, as ours), one `Channel.log` per message with the log's protobuf schemas and the
+  payloads packed as the live stream packs them, beside the recorder's lists; its
+  ``log_us_per_period`` against the same no-log median (issue 17 asks which writer is faster).
 
 Every time is the median over the repeats (min and max given beside it). Sizes and chunk
 counts are the same in every repeat.
@@ -182,6 +187,45 @@ def _stats(values: list[float], digits: int = 2) -> dict:
             "max": round(max(values), digits), "runs": len(values)}
 
 
+def _sdk_writer_run(path: str, rows: dict) -> float:
+    """The recorder's lists as in no_log, plus every full-rate message through foxglove-sdk's
+    MCAP writer (the live stream's channel definitions, on a context of their own)."""
+    import foxglove
+    from foxglove.mcap import MCAPCompression, MCAPWriteOptions
+
+    from hil.live.stream import _FixedTopic
+    from hil.logs.recorder import SENSOR_FIELDS, TELEMETRY_FIELDS, Recorder
+    from plant_rt import TRUTH_FIELDS
+
+    context = foxglove.Context()
+    truth_ch = _FixedTopic(context, "/plant/truth", "hil.PlantTruth",
+                           [(f, "double" if f == "t_s" else "float") for f in TRUTH_FIELDS], {})
+    sensor_ch = _FixedTopic(context, "/plant/sensors", "hil.SensorSample",
+                            [("period", "fixed32")] + [(f, "fixed32") for f in SENSOR_FIELDS], {})
+    tele_ch = _FixedTopic(context, "/ctrl/telemetry", "hil.Telemetry",
+                          [("period", "fixed32")] + [(f, "fixed32" if i < 4 else "float")
+                                                     for i, f in enumerate(TELEMETRY_FIELDS)], {})
+    options = MCAPWriteOptions(compression=MCAPCompression.Lz4, chunk_size=64 * 1024)
+    rec = Recorder(rows["period_s"])
+    periods, truth, sensors, telemetry = rows["periods"], rows["truth"], rows["sensors"], rows["telemetry"]
+    period, tele = rec.period, rec.telemetry
+    period_s = rows["period_s"]
+    t_start = time.perf_counter()
+    writer = foxglove.open_mcap(path, allow_overwrite=True, context=context, writer_options=options)
+    for i, k in enumerate(periods):
+        t = round(k * period_s * 1e9)
+        s = sensors[i]
+        period(k, truth[i], s)
+        truth_ch.log(t, truth[i])
+        sensor_ch.log(t, (k, s.adc_i1, s.adc_i2, s.adc_vdc, s.encoder, s.status))
+        m = telemetry.get(k)
+        if m is not None:
+            tele(m)
+            tele_ch.log(t, tuple(vars(m).values()))
+    writer.close()
+    return time.perf_counter() - t_start
+
+
 def run(quick: bool = False) -> dict:
     from hil.logs.reader import log_summary, read_log
     from hil.logs.recorder import LOG_BATCH_PERIODS
@@ -202,6 +246,7 @@ def run(quick: bool = False) -> dict:
     times: dict = {v: [] for v in VARIANTS}
     times["per_message"] = []
     times["no_log"] = []
+    times["sdk"] = []
     finishes: list[float] = []
     with tempfile.TemporaryDirectory() as tmp:
         for r in range(repeats):
@@ -213,6 +258,7 @@ def run(quick: bool = False) -> dict:
             times["per_message"].append(_recorder_run(os.path.join(tmp, "per_message.mcap"), rows,
                                                       per_message=True))
             times["no_log"].append(_recorder_run(None, rows))
+            times["sdk"].append(_sdk_writer_run(os.path.join(tmp, "sdk.mcap"), rows))
         no_log = statistics.median(times["no_log"])
         result["no_log_us_per_period"] = _stats([t / n * 1e6 for t in times["no_log"]])
         recorder_path = {}
@@ -235,6 +281,14 @@ def run(quick: bool = False) -> dict:
         result["log_cost_per_message_over_batched_ratio"] = round(
             (statistics.median(times["per_message"]) - no_log) / (statistics.median(times[VARIANTS[0]]) - no_log), 2)
         result["chunk_finish_ms_lz4_64KiB"] = _stats(finishes, 3)
+        sdk_path = os.path.join(tmp, "sdk.mcap")
+        sdk_summary = log_summary(sdk_path)
+        result["foxglove_sdk_writer_lz4_64KiB"] = {
+            "us_per_period": _stats([t / n * 1e6 for t in times["sdk"]]),
+            "log_us_per_period": round((statistics.median(times["sdk"]) - no_log) / n * 1e6, 2),
+            "over_recorder_path_ratio": round((statistics.median(times["sdk"]) - no_log)
+                                              / (statistics.median(times[VARIANTS[0]]) - no_log), 2),
+            "messages": sdk_summary["message_count"], "chunks": sdk_summary["chunk_count"]}
         default_path = os.path.join(tmp, "lz4_65536.mcap")
         reads, summaries = [], []
         for _ in range(repeats):
