@@ -100,6 +100,7 @@ class ParamId(IntEnum):
     DEAD_TIME_COMP_S = 63  # dead-time compensation by current sign (FOC duties, DTC observer), 0 = off
     DEVICE_DROP_COMP_V = 64  # DTC: device drop compensated in the observer voltage, 0 = off
     DELAY_COMP_PERIODS = 65  # DTC: 1 = answers act one period late (integrate what acted, predict)
+    CURRENT_ZERO_CAL_PERIODS = 66  # at each enable, periods with the bridge off to measure the current ADCs' zero, 0 = off
 
 
 # HELLO capability bits

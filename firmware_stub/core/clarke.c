@@ -7,6 +7,8 @@
 void clarke_derive(clarke_cfg *cfg)
 {
     float k = cfg->current_a_per_count;
+    cfg->offset1_counts = cfg->current_offset_counts;
+    cfg->offset2_counts = cfg->current_offset_counts;
     switch (cfg->phases) {
     case CLARKE_PHASES_AC: /* i1 = i_a, i2 = i_c: i_b = -i_a - i_c */
         cfg->a1 = k;
@@ -31,8 +33,8 @@ void clarke_derive(clarke_cfg *cfg)
 
 void clarke_from_adc(const clarke_cfg *cfg, uint16_t adc_i1, uint16_t adc_i2, clarke_out *out)
 {
-    float c1 = (float)adc_i1 - cfg->current_offset_counts;
-    float c2 = (float)adc_i2 - cfg->current_offset_counts;
+    float c1 = (float)adc_i1 - cfg->offset1_counts;
+    float c2 = (float)adc_i2 - cfg->offset2_counts;
     float ia = cfg->a1 * c1 + cfg->a2 * c2;
     float ib = cfg->b1 * c1 + cfg->b2 * c2;
     float ic = -ia - ib;

@@ -16,6 +16,10 @@ typedef struct {
     float current_a_per_count;   /* ADC scale, A per count */
     float current_offset_counts; /* ADC count at zero current */
     uint8_t phases;              /* clarke_phases: which phases adc_i1, adc_i2 measure */
+    /* per-channel zero, counts: current_offset_counts from clarke_derive(), or what the
+     * start-up calibration measured (control.c, CURRENT_ZERO_CAL_PERIODS) */
+    float offset1_counts;
+    float offset2_counts;
     /* derived by clarke_derive(): i_a = a1 c1 + a2 c2, i_b = b1 c1 + b2 c2 */
     float a1, a2, b1, b2;
 } clarke_cfg;

@@ -53,6 +53,7 @@ void ctl_params_default(ctl_params *p)
     p->dead_time_comp_s = CTL_DEFAULT_DEAD_TIME_COMP_S;
     p->device_drop_comp_v = CTL_DEFAULT_DEVICE_DROP_COMP_V;
     p->delay_comp_periods = CTL_DEFAULT_DELAY_COMP_PERIODS;
+    p->current_zero_cal_periods = CTL_DEFAULT_CURRENT_ZERO_CAL_PERIODS;
 }
 
 void ctl_derive(ctl *c)
@@ -128,6 +129,7 @@ void ctl_derive(ctl *c)
     invcomp_derive(&k->inv);
     k->inv_comp_on = (p->dead_time_comp_s > 0.0f || p->device_drop_comp_v > 0.0f) ? 1u : 0u;
     k->delay_comp = p->delay_comp_periods;
+    k->zero_cal_periods = p->current_zero_cal_periods;
     k->dtc_comp = (uint8_t)(k->inv_comp_on | k->delay_comp);
     k->foc_angle_source = p->foc_angle_source;
 
@@ -189,6 +191,10 @@ int ctl_set_command(ctl *c, const hil_command *cmd)
         st->fault_value = 0.0f;
     } else if (st->state == HIL_STATE_IDLE) {
         st->state = HIL_STATE_RUNNING;
+        /* the bridge has been off: measure the current ADCs' zero before driving it */
+        st->zero_cal_left = c->cfg.zero_cal_periods;
+        st->zero_cal_sum1 = 0.0f;
+        st->zero_cal_sum2 = 0.0f;
         st->pi.integral_nm = 0.0f;
         st->flux_hyst.out = 1u;
         st->torque_hyst.out = 1u;
@@ -303,11 +309,27 @@ uint8_t ctl_step(ctl *c, const hil_sample *s, hil_telemetry *tm)
     const ctl_cfg *k = &c->cfg;
     ctl_state *st = &c->st;
 
+    /* Start-up zero calibration (CURRENT_ZERO_CAL_PERIODS): after an enable the bridge stays
+     * off (vector 0) for N periods; no current flows (a spinning rotor's line back-EMF is
+     * below the link), so the ADCs read their zero plus noise. Its mean replaces the nominal
+     * zero, per channel, as drive firmware does at start-up. */
+    uint8_t calibrating = 0u;
+    if (st->zero_cal_left > 0u && st->state == HIL_STATE_RUNNING) {
+        float nominal = c->params.current_offset_counts;
+        st->zero_cal_sum1 += (float)s->adc_i1 - nominal;
+        st->zero_cal_sum2 += (float)s->adc_i2 - nominal;
+        if (--st->zero_cal_left == 0u) {
+            float n = (float)k->zero_cal_periods;
+            c->cfg.clarke.offset1_counts = nominal + st->zero_cal_sum1 / n;
+            c->cfg.clarke.offset2_counts = nominal + st->zero_cal_sum2 / n;
+        }
+        calibrating = 1u;
+    }
     clarke_out i;
     clarke_from_adc(&k->clarke, s->adc_i1, s->adc_i2, &i);
     float vdc_v = ((float)s->adc_vdc - k->vdc_offset_counts) * k->vdc_v_per_count;
 
-    uint8_t running = st->state == HIL_STATE_RUNNING;
+    uint8_t running = st->state == HIL_STATE_RUNNING && !calibrating;
     if (st->started) {
         enc_step(&k->enc, &st->enc, s->encoder);
     } else {
@@ -351,7 +373,7 @@ uint8_t ctl_step(ctl *c, const hil_sample *s, hil_telemetry *tm)
     uint8_t sector = 0u;
     float torque_ref = 0.0f;
     st->answer_duty = 0u;
-    if (st->state == HIL_STATE_RUNNING) {
+    if (st->state == HIL_STATE_RUNNING && !calibrating) {
         float value = 0.0f;
         uint8_t fault = prot_hardware(&k->prot, i.i_peak_a, vdc_v, s->status, &value);
         if (fault == PROT_FAULT_NONE) {
@@ -457,6 +479,7 @@ static const param_desc param_table[] = {
     P(HIL_PARAM_DEAD_TIME_COMP_S, dead_time_comp_s, PT_F32, 0, 0.0f, 1e-5f),
     P(HIL_PARAM_DEVICE_DROP_COMP_V, device_drop_comp_v, PT_F32, 0, 0.0f, 10.0f),
     P(HIL_PARAM_DELAY_COMP_PERIODS, delay_comp_periods, PT_U8, 1, 0.0f, 1.0f),
+    P(HIL_PARAM_CURRENT_ZERO_CAL_PERIODS, current_zero_cal_periods, PT_U32, 1, 0.0f, 65535.0f),
 };
 
 #undef P

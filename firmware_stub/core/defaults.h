@@ -40,6 +40,7 @@
 #define CTL_DEFAULT_DEAD_TIME_COMP_S 0.0f    /* the paper's plant has no dead time */
 #define CTL_DEFAULT_DEVICE_DROP_COMP_V 0.0f  /* DTC observer; the paper's plant has no device drop */
 #define CTL_DEFAULT_DELAY_COMP_PERIODS 0u    /* DTC; the paper's answer acts at once */
+#define CTL_DEFAULT_CURRENT_ZERO_CAL_PERIODS 0u /* the paper's sensors have no offset */
 #define CTL_DESIGN_DEAD_TIME_COMP_BAND_A 0.1f /* linear zone of sign(i): 8 ADC counts, 16x the 0.5-count noise */
 
 /* python -m hil.ekf_design (DLQE by the discrete Riccati equation) for the

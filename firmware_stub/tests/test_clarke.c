@@ -11,7 +11,7 @@ static uint16_t counts_of(double amps) { return (uint16_t)lround(OFFSET + amps /
  * i_beta = I sin theta (eq. 7). */
 static void balanced_set_for_pair(uint8_t phases)
 {
-    clarke_cfg cfg = {A_PER_COUNT, OFFSET, phases, 0, 0, 0, 0};
+    clarke_cfg cfg = {A_PER_COUNT, OFFSET, phases, 0, 0, 0, 0, 0, 0};
     clarke_derive(&cfg);
     const double amp = 12.0;
     /* one count of quantisation on each input: i_beta sums up to 3/sqrt3 of them */
@@ -37,7 +37,7 @@ static void pair_bc(void **state) { (void)state; balanced_set_for_pair(CLARKE_PH
 static void scaling_and_offset(void **state)
 {
     (void)state;
-    clarke_cfg cfg = {0.5f, 100.0f, CLARKE_PHASES_AB, 0, 0, 0, 0};
+    clarke_cfg cfg = {0.5f, 100.0f, CLARKE_PHASES_AB, 0, 0, 0, 0, 0, 0};
     clarke_derive(&cfg);
     clarke_out out;
     clarke_from_adc(&cfg, 104u, 100u, &out); /* i_a = 2 A, i_b = 0 */
