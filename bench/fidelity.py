@@ -34,7 +34,8 @@ T = 50e-6
 RPM = 2 * math.pi / 60
 
 # Board parameters that switch the compensations off (the hardware profile turns them on).
-COMP_OFF = {"dead_time_comp_s": 0.0, "device_drop_comp_v": 0.0, "delay_comp_periods": 0.0}
+COMP_OFF = {"dead_time_comp_s": 0.0, "device_drop_comp_v": 0.0, "delay_comp_periods": 0.0,
+            "current_zero_cal_periods": 0.0}
 
 
 def _hardware_pieces() -> dict[str, dict]:
@@ -63,9 +64,10 @@ def scenarios(quick: bool = False) -> list[tuple[str, Path, dict, dict]]:
     dt_comp = {"dead_time_comp_s": 2.0e-6}
     drop_comp = {"device_drop_comp_v": 1.5}
     delay_comp = {"delay_comp_periods": 1.0}
+    zero_cal = {"current_zero_cal_periods": 400.0}
     out = [("ideal (paper)", PAPER, {}, {})]
     for name, comp in (("delay", delay_comp), ("dead time", dt_comp), ("device drop", drop_comp),
-                       ("noise", None), ("offset + gain", None), ("R +20 %", None)):
+                       ("noise", None), ("offset + gain", zero_cal), ("R +20 %", None)):
         out.append((name, PAPER, hw[name], {}))
         if comp is not None:
             out.append((f"{name} + comp", PAPER, hw[name], comp))
@@ -73,6 +75,7 @@ def scenarios(quick: bool = False) -> list[tuple[str, Path, dict, dict]]:
         ("hardware, no comp", HARDWARE, {}, dict(COMP_OFF)),
         ("hardware, dead time + drop comp", HARDWARE, {}, {**COMP_OFF, **dt_comp, **drop_comp}),
         ("hardware, delay comp", HARDWARE, {}, {**COMP_OFF, **delay_comp}),
+        ("hardware, all comp but the zero calibration", HARDWARE, {}, {"current_zero_cal_periods": 0.0}),
         ("hardware, all comp (profile default)", HARDWARE, {}, {}),
     ]
     if quick:
@@ -213,5 +216,41 @@ def table(results: dict) -> str:
     return "\n".join(lines)
 
 
+PAPER_PLANS = sorted((Path(__file__).resolve().parent.parent / "test_plans").glob("0[1-6]_*.yaml"))
+
+
+def hardware_plans() -> list[dict]:
+    """The paper plans on paper-hardware (whether or not a plan lists that profile): every
+    check's measured value against the limits the plan gives that profile."""
+    import tempfile
+
+    from hil.plans.format import load_plan
+    from hil.run.runner import run_plan
+
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for path in PAPER_PLANS:
+            plan = load_plan(path)
+            listed = "paper-hardware" in [p.label for p in plan.profiles]
+            result, _ = run_plan(plan, out_dir=Path(tmp), reports=False, profile="paper-hardware")
+            for c in result.checks:
+                limits = c.limits.describe() if c.limits is not None else ""
+                if not listed and limits:
+                    limits += " (the paper profile's: the plan does not run on this one)"
+                rows.append({"plan": path.stem[:2], "check": c.name, "outcome": c.outcome.value,
+                             "measured": c.measured, "unit": c.unit, "limits": limits})
+    return rows
+
+
+def plans_table(rows: list[dict]) -> str:
+    lines = ["| plan | check | outcome | measured | limits (paper-hardware) |", "|---|---|---|---|---|"]
+    for r in rows:
+        m = "-" if r["measured"] is None else f"{r['measured']:.4g} {r['unit']}"
+        lines.append(f"| {r['plan']} | {r['check']} | {r['outcome']} | {m} | {r['limits']} |")
+    return "\n".join(lines)
+
+
 if __name__ == "__main__":
     print(table(run(quick="--quick" in sys.argv[1:])))
+    print()
+    print(plans_table(hardware_plans()))

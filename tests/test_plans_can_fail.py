@@ -147,3 +147,23 @@ steps:
     assert second.profile == str(profile)
     _assert_fails_on(second, "speed reached")
     assert first.checks[0].measured == pytest.approx(second.checks[0].measured, abs=1e-6)
+
+
+def test_plan02_hardware_limits_fail_when_the_boards_resistance_is_colder_still(tmp_path):
+    """Plan 02's flux limits on paper-hardware (93.0 .. 97.0 mWb, derived from the board's
+    resistance error dR = 0.0909 ohm: bench/hardware_limits.py predicts 95.0 mWb) fail when
+    the board's R is broken to 0.35 ohm (dR = 0.208 ohm, more than twice the error: the d-axis
+    flux error x = dR i_q / w_e grows from 2.1 to 4.9 mWb and the true flux falls under 93)."""
+    plan = _variant(tmp_path, "02_steady_state_3000rpm.yaml",
+                    param_set={"stator_resistance_ohm": 0.35})
+    result, _ = run_plan(plan, profile="paper-hardware", reports=False)
+    _assert_fails_on(result, "flux magnitude at its reference")
+
+
+def test_plan01_hardware_limit_fails_when_the_board_holds_less_torque(tmp_path):
+    """Plan 01's torque-at-the-limit window on paper-hardware (1.58 .. 2.1 Nm) fails when the
+    board's torque limit is broken to 1.6 Nm: the true torque falls to about 1.6 x 1.733 / 2
+    = 1.39 Nm."""
+    plan = _variant(tmp_path, "01_speed_step_sensored.yaml", param_set={"torque_limit_nm": 1.6})
+    result, _ = run_plan(plan, profile="paper-hardware", reports=False)
+    _assert_fails_on(result, "torque at the limit while accelerating")
