@@ -13,6 +13,7 @@ from __future__ import annotations
 import base64
 import json
 import math
+import re
 import sys
 import types
 import xml.etree.ElementTree as ET
@@ -151,6 +152,13 @@ def model_run(plan: Plan, link: str | None = None, mode: str | None = None,
 PAPER_STEP_PLAN = REPO / "test_plans" / "01_speed_step_sensored.yaml"
 
 
+def step_plan_text() -> str:
+    """Plan 01 on the paper profile alone: the plugin tests count one item per check (a plan
+    on two profiles has two of each, named [profile]; test_plugin_runs_each_listed_profile...)."""
+    text = re.sub(r"^profiles: .*\n", "", PAPER_STEP_PLAN.read_text(), flags=re.M)
+    return re.sub(r"^      profile_limits:\n(        .*\n)+", "", text, flags=re.M)
+
+
 @pytest.fixture(scope="module")
 def paper_step_run():
     plan = load_plan(PAPER_STEP_PLAN)
@@ -187,7 +195,7 @@ def test_paper_load_step_limits_hold_on_the_loop_model():
 
 
 def test_impossible_limit_makes_the_plan_fail_with_the_measured_value(tmp_path):
-    text = PAPER_STEP_PLAN.read_text().replace("limits: {high: 200, marginal: 30, unit: ms}",
+    text = step_plan_text().replace("limits: {high: 200, marginal: 30, unit: ms}",
                                                "limits: {high: 20, unit: ms}")
     plan = parse_plan(text, "impossible.yaml", tmp_path)
     result, signals = model_run(plan)
@@ -208,7 +216,7 @@ def test_impossible_limit_makes_the_plan_fail_with_the_measured_value(tmp_path):
 
 
 def test_timeout_plan_reports_error_testcase_and_skipped_checks(tmp_path):
-    text = PAPER_STEP_PLAN.read_text().replace("hold_s: 0.02, timeout_s: 0.5", "hold_s: 0.02, timeout_s: 0.05")
+    text = step_plan_text().replace("hold_s: 0.02, timeout_s: 0.5", "hold_s: 0.02, timeout_s: 0.05")
     plan = parse_plan(text, "short.yaml", tmp_path)
     result, signals = model_run(plan)
     assert result.outcome is Outcome.TIMEOUT and "not met within 0.05 s" in result.reason
@@ -311,7 +319,7 @@ def fake_runner(monkeypatch):
 
 def test_plugin_collects_one_item_per_check(pytester, fake_runner):
     plans = pytester.mkdir("test_plans")
-    (plans / "step.yaml").write_text(PAPER_STEP_PLAN.read_text())
+    (plans / "step.yaml").write_text(step_plan_text())
     (plans / "profile.yaml").write_text("motor: {resistance_ohm: 0.466}\n")   # not a plan
     result = pytester.runpytest("--collect-only", "-q", "test_plans", *PLUGIN_ARGS)
     plan = load_plan(PAPER_STEP_PLAN)
@@ -322,7 +330,7 @@ def test_plugin_collects_one_item_per_check(pytester, fake_runner):
 
 def test_plugin_runs_the_plan_once_and_reports_each_check(pytester, fake_runner):
     plans = pytester.mkdir("test_plans")
-    text = PAPER_STEP_PLAN.read_text().replace("limits: {high: 5, marginal: 1, unit: \"%\"}",
+    text = step_plan_text().replace("limits: {high: 5, marginal: 1, unit: \"%\"}",
                                                "limits: {high: 1, unit: \"%\"}")
     (plans / "step.yaml").write_text(text)
     out = pytester.path / "out"
@@ -346,7 +354,7 @@ def test_plugin_shows_an_invalid_plan_as_a_collection_error(pytester, fake_runne
 
 def test_plugin_plan_item_fails_on_timeout(pytester, fake_runner):
     plans = pytester.mkdir("test_plans")
-    text = PAPER_STEP_PLAN.read_text().replace("hold_s: 0.02, timeout_s: 0.5", "hold_s: 0.02, timeout_s: 0.05")
+    text = step_plan_text().replace("hold_s: 0.02, timeout_s: 0.5", "hold_s: 0.02, timeout_s: 0.05")
     (plans / "short.yaml").write_text(text)
     result = pytester.runpytest("test_plans", *PLUGIN_ARGS)
     n = len(load_plan(PAPER_STEP_PLAN).checks)
@@ -397,7 +405,7 @@ def test_bench_fixture_opens_and_closes_a_bench(pytester, monkeypatch):
 
 def test_plugin_marginal_passes_with_a_warning(pytester, fake_runner):
     plans = pytester.mkdir("test_plans")
-    text = PAPER_STEP_PLAN.read_text().replace("limits: {high: 5, marginal: 1, unit: \"%\"}",
+    text = step_plan_text().replace("limits: {high: 5, marginal: 1, unit: \"%\"}",
                                                "limits: {high: 3.5, marginal: 1, unit: \"%\"}")
     (plans / "step.yaml").write_text(text)
     # Run from the pytest console script, the outer process has already imported the plugin
@@ -420,7 +428,7 @@ def test_plugin_reports_a_runner_failure_on_every_item(pytester, monkeypatch):
     monkeypatch.setitem(sys.modules, "hil.run.runner", module)
     monkeypatch.setenv("PYTEST_DISABLE_PLUGIN_AUTOLOAD", "1")
     plans = pytester.mkdir("test_plans")
-    (plans / "step.yaml").write_text(PAPER_STEP_PLAN.read_text())
+    (plans / "step.yaml").write_text(step_plan_text())
     result = pytester.runpytest("test_plans", *PLUGIN_ARGS)
     n_items = len(load_plan(PAPER_STEP_PLAN).checks) + 1
     result.assert_outcomes(failed=n_items)

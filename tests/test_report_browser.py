@@ -58,7 +58,7 @@ def reports(tmp_path_factory) -> Path:
 
 
 def test_plan_report_renders_with_its_plots_and_no_console_messages(reports, tmp_path):
-    page = next(reports.glob("*/report.html"))
+    page = sorted(reports.glob("**/report.html"))[0]
     dom, console = render(page, tmp_path / "chrome")
     assert "speed-step-sensored" in dom
     svgs = images(dom)
@@ -86,7 +86,7 @@ def drawn_fraction(svg: str, points: list[tuple[float, float]], work: Path) -> f
 
 
 def test_chromium_draws_the_check_figures_trace_where_its_points_are(reports, tmp_path):
-    page = next(reports.glob("*/report.html"))
+    page = sorted(reports.glob("**/report.html"))[0]
     svg = first_trace_alone(images(page.read_text())[0].decode())
     points = polyline_points(svg)[0]
     assert len(points) > 100 and drawn_fraction(svg, points, tmp_path) > 0.9
@@ -94,7 +94,7 @@ def test_chromium_draws_the_check_figures_trace_where_its_points_are(reports, tm
 
 def test_a_figure_whose_trace_is_not_where_its_points_say_is_seen(reports, tmp_path):
     """The drawing check can fail: the trace drawn 40 px lower than the points compared."""
-    page = next(reports.glob("*/report.html"))
+    page = sorted(reports.glob("**/report.html"))[0]
     svg = first_trace_alone(images(page.read_text())[0].decode())
     points = polyline_points(svg)[0]
     text = re.search(r'<polyline points="([^"]*)"', svg).group(1)

@@ -21,6 +21,7 @@ F32 = C.c_float
 
 class ClarkeCfg(C.Structure):
     _fields_ = [("current_a_per_count", F32), ("current_offset_counts", F32), ("phases", C.c_uint8),
+                ("offset1_counts", F32), ("offset2_counts", F32),
                 ("a1", F32), ("a2", F32), ("b1", F32), ("b2", F32)]
 
 
