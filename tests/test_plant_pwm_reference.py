@@ -11,8 +11,15 @@ centre-aligned PWM with the carrier valley at the sampling instant, every turn-o
 delayed by the dead time.
 
 Limits (written before the first run, from issue 14): phase-current error at most 1e-6 of the
-peak; DC-link energy to 1e-6 of the energy exchanged. The runs are kept short (CI cost); the
-rotor still turns through many current zero crossings at rated and twice rated speed.
+peak; DC-link energy to 1e-6 of the energy exchanged. Most runs are kept short (CI cost; the
+rotor still turns through many current zero crossings at rated and twice rated speed); one
+covers the issue's whole second at twice rated speed.
+
+A phase whose current reaches zero while both its switches are off floats only if its
+terminal stays between the rails; at twice rated speed the line back-EMF exceeds the link and
+the opposite diode takes over at once. Until 2026-11-24 this reference left such a phase
+floating (its rail events fire on a crossing, and the terminal was already beyond the rail),
+which was the 1.8e-4 "unexplained" error at twice rated speed: the plant was right.
 """
 from __future__ import annotations
 
@@ -120,6 +127,17 @@ def reference_period(circ: SwitchedCircuit, s, duty, T: float, td: float, modes)
                     cur.append("P" if i[x] > 0.0 else "N" if i[x] < 0.0 else "F")
             if cur.count("F") >= 2:
                 raise AssertionError("two floating phases: not met in these runs")
+            if "F" in cur:
+                # A phase can only float while its terminal stays between the rails: one that
+                # would float beyond a rail (its current just reached zero with the line
+                # back-EMF above the link, as at twice rated speed) has that rail's diode on at
+                # once. The float events below only see the terminal cross a rail later.
+                x = cur.index("F")
+                v = circ.float_voltage(cur, s)
+                if v > circ.vdc + circ.drop:
+                    cur[x] = "N"
+                elif v < -circ.drop:
+                    cur[x] = "P"
             events, tags = [], []
             for x in range(3):
                 if cur[x] in ("P", "N"):
@@ -208,18 +226,26 @@ def run(speed: float, n: int, seed: int, td: float, drop: float, knee: float = 0
             "energy_rel": abs(e_plant - s[4]) / e_abs, "e_abs": e_abs}
 
 
-@pytest.mark.parametrize("speed", [
-    RATED_RAD_S,
-    pytest.param(2.0 * RATED_RAD_S, marks=pytest.mark.xfail(
-        strict=True, reason="not explained yet: 1.8e-4 of the peak at twice rated speed, the "
-        "same with the leg-window path off (the general network), energy 8e-6; plant or "
-        "reference to be found"))])
+@pytest.mark.parametrize("speed", [RATED_RAD_S, 2.0 * RATED_RAD_S])
 def test_pwm_dead_time_matches_switched_circuit_reference(speed):
     """Duties with 2 us dead time through current zero crossings (diode currents reaching
     zero, phases floating), rated and twice rated speed: phase currents to 1e-6 of the peak,
     DC-link energy to 1e-6 of the energy exchanged (issue 14's limits)."""
     result = run(speed, 1200, seed=1, td=2e-6, drop=0.0)
     assert result["crossings"] >= 6 and result["peak"] > 3.0
+    assert result["current_rel"] < 1e-6
+    assert result["energy_rel"] < 1e-6
+
+
+def test_one_second_of_pwm_with_dead_time_at_twice_rated_speed_matches_the_reference():
+    """Issue 14's span: 1 s (20,000 periods, about 50 s here) of random duties with 2 us dead
+    time at twice rated speed, where the line back-EMF (101 V peak) exceeds the 70 V link and
+    a phase whose current reaches zero in a dead time often has its high diode take over at
+    once: phase currents to 1e-6 of the peak, energy to 1e-6."""
+    result = run(2.0 * RATED_RAD_S, 20000, seed=5, td=2e-6, drop=0.0)
+    # that the run goes through hundreds of zero crossings (100 electrical turns, two per
+    # phase each at most): a guard on what the test exercises, not a limit on the plant
+    assert result["crossings"] >= 300 and result["peak"] > 3.0
     assert result["current_rel"] < 1e-6
     assert result["energy_rel"] < 1e-6
 
