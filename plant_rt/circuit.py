@@ -20,8 +20,11 @@ knee current; U_d = device_drop_v). Star point floating, so sum i_x = 0:
 
 Events end a step early, located by re-integrating from the step's start (Illinois method):
 a P/N current reaching zero (the phase becomes O), a floating terminal of an O phase leaving
-[-U_d, v_dc + U_d] (the diode it reaches turns on), and, with no current at all, a line
-back-EMF overcoming the rails (the pair of diodes or switches that conducts first turns on).
+[-U_d, v_dc + U_d] (the diode it reaches turns on), with no current at all a line back-EMF
+overcoming the rails (the pair of diodes or switches that conducts first turns on), and, with
+a device drop, a driven leg's current crossing +-i_knee: the drop's kink, where the RHS is
+continuous but not smooth, so an RK4 step across it would lose its order (1e-4 of the peak
+against the switched-circuit reference before; the step now ends there, nothing changes state).
 This is what makes the safe state at 3000 rpm decay to zero and then stay there while the line
 back-EMF is below the 70 V link.
 
@@ -70,6 +73,9 @@ class Network:
         self.release_pair = (0, 1)
         self.te = 0.0
         self.open_phase: int | None = None
+        # per phase: +1 while |i| > i_knee at the last accepted state, -1 inside the knee
+        # (which way the knee event looks); only with a device drop
+        self._knee_side = [0, 0, 0]
 
     def set_open_phase(self, phase: int | None) -> None:
         """Phase 0, 1 or 2 disconnected from its leg (None: all connected)."""
@@ -166,14 +172,18 @@ class Network:
         for _ in range(6):
             self.rhs(t, y[0], y[1], y[2], y[3], y[4])
             best = None
+            self._note_knee_sides()
             for g, tag in self.event_values():
-                if tag[0] != "i" and g > 0.0 and (best is None or g > best[0]):
+                if tag[0] not in ("i", "k") and g > 0.0 and (best is None or g > best[0]):
                     best = (g, tag)
             if best is None:
                 return
             self._transition(t, best[1], y)
 
     def _transition(self, t: float, tag: tuple, y: list[float]) -> None:
+        if tag[0] == "k":               # a knee: the step stopped at the kink, no state changes
+            self.events += 1
+            return
         kinds = list(self.kinds)
         if tag[0] == "i":
             kinds[tag[1]] = O
@@ -314,7 +324,18 @@ class Network:
             x = self.zero[0]
             out.append((self.vx - self.vdc - self.ud, ("hi", x)))
             out.append((-self.ud - self.vx, ("lo", x)))
+        if self.ud:
+            knee, side = self.knee, self._knee_side
+            for x in range(3):
+                if (kinds[x] == H or kinds[x] == L) and side[x]:
+                    out.append((side[x] * (knee - abs(cur[x])), ("k", x)))
         return out
+
+    def _note_knee_sides(self) -> None:
+        """Which side of the knee each driven current is on at the last rhs() state."""
+        if self.ud:
+            knee, cur = self.knee, self.cur
+            self._knee_side = [1 if abs(cur[x]) > knee else -1 for x in range(3)]
 
     # ----------------------------------------------------------- integration
     def _rk4(self, t: float, y: list[float], h: float, k1: tuple) -> tuple[list[float], tuple]:
@@ -352,6 +373,7 @@ class Network:
         t = t0
         budget = MAX_EVENTS_PER_INTERVAL
         k1 = self.rhs(t, *y)
+        self._note_knee_sides()
         g0 = self.event_values()
         while t1 - t > 1e-12 * h_nom:
             h = min(h_nom, t1 - t)
@@ -382,6 +404,7 @@ class Network:
                 if self.zero:
                     self._project(y)
             k1 = self.rhs(t, *y)
+            self._note_knee_sides()
             g0 = self.event_values()
         return y
 
