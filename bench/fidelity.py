@@ -242,6 +242,38 @@ def hardware_plans() -> list[dict]:
     return rows
 
 
+def plan05_one_error_away() -> dict:
+    """Plan 05 on paper-hardware with the resistance error, then the DC-link reading error,
+    taken away (profile overrides): how much of the rotor-position bias each one is."""
+    import tempfile
+
+    from hil.plans.format import load_plan
+    import yaml
+
+    from hil.run.runner import run_plan
+
+    plan = load_plan(PAPER_PLANS[4])
+    exact = {"R exact (plant 0.466 ohm)": {"motor": {"resistance_ohm": 0.466}},
+             "DC-link reading exact": {"sensors": {"dc_voltage": {
+                 "offset_counts": 0.0, "gain": 1.0}}}}
+    out = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for name, override in exact.items():
+            data = yaml.safe_load(HARDWARE.read_text())
+            for section, values in override.items():
+                for key, value in values.items():
+                    if isinstance(value, dict):
+                        data[section][key].update(value)
+                    else:
+                        data[section][key] = value
+            path = Path(tmp) / "variant.yaml"
+            path.write_text(yaml.safe_dump(data))
+            result, _ = run_plan(plan, out_dir=Path(tmp), reports=False, profile=str(path))
+            out[name] = {c.name: round(c.measured, 2) for c in result.checks
+                         if c.measured is not None and "RMS" in c.name}
+    return out
+
+
 def plans_table(rows: list[dict]) -> str:
     lines = ["| plan | check | outcome | measured | limits (paper-hardware) |", "|---|---|---|---|---|"]
     for r in rows:
@@ -254,3 +286,6 @@ if __name__ == "__main__":
     print(table(run(quick="--quick" in sys.argv[1:])))
     print()
     print(plans_table(hardware_plans()))
+    print()
+    for name, values in plan05_one_error_away().items():
+        print(f"plan 05 on paper-hardware, {name}: " + ", ".join(f"{k} {v} deg" for k, v in values.items()))
