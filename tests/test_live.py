@@ -119,24 +119,61 @@ def test_a_viewer_sees_the_speed_follow_the_reference_and_changes_it(tmp_path):
                 got = await viewer.messages(1.0)
                 speeds = [m.speed_rpm for t, m in got if t == "/plant/truth"]
                 assert abs(sum(speeds) / len(speeds) - 2500) < 50
+                # the viewer lets it run as fast as it can (how fast depends on the machine:
+                # the pacing itself is test_the_pace_a_viewer_chooses_is_kept below)
+                await viewer.publish_command({"pace": "fast"})
+                await viewer.messages(0.5)
         asyncio.run(asyncio.wait_for(session(), 60))
     finally:
         serve.terminate()
         out, err = serve.communicate(timeout=20)
     assert f"live (Foxglove) on ws://127.0.0.1:{port}" in err
+    assert "hil serve: live:" not in err          # every /cmd message was taken
 
 
-def test_bad_live_commands_are_refused_by_name():
+def test_the_pace_a_viewer_chooses_is_kept():
+    from hil.cli.serve import Pacer
+
+    pacer = Pacer("realtime", 50e-6)
+    assert pacer.wait_s(0, 100.0) == 0.0                  # pacing starts here
+    assert pacer.wait_s(200, 100.002) == pytest.approx(0.008)   # 10 ms simulated in 2 ms
+    assert pacer.wait_s(400, 100.030) == 0.0              # behind the clock: no sleep
+    pacer.mode = "fast"
+    assert pacer.wait_s(10_000, 100.031) == 0.0           # fast never sleeps
+    pacer.mode = "realtime"                               # counted from the switch back
+    assert pacer.wait_s(10_000, 100.040) == 0.0
+    assert pacer.wait_s(10_200, 100.041) == pytest.approx(0.009)
+
+
+def test_viewer_parameters_go_through_the_modbus_mailbox_and_bad_ones_are_refused_by_name():
     from hil.live.stream import LiveStream
+    from hil.ports.modbus import ControlMailbox
 
     stream = LiveStream("127.0.0.1", 0, period_s=50e-6)
     try:
+        stream._command(b'{"speed_ref_rpm": 100}')          # no mailbox: a plan's run
+        assert "takes no parameters from viewers" in stream.take_errors()[0]
+        mailbox = ControlMailbox(speed_ref_rpm=1500, run=True)
+        stream.attach_mailbox(mailbox)
         stream._command(b'{"speed_ref_rmp": 100}')
         stream._command(b"[1, 2]")
-        stream._command(b'{"speed_ref_rpm": 100}')
-        assert stream.take_commands() == [{"speed_ref_rpm": 100.0}]
-        assert "unknown key 'speed_ref_rmp'" in stream.errors[0]
-        assert "expected a JSON object" in stream.errors[1]
+        stream._command(b'{"load_torque_nm": "a lot"}')
+        stream._command(b'{"pace": "slow"}')
+        stream._command(b'{"speed_ref_rpm": 2500, "enable": false, "load_torque_nm": 0.5}')
+        stream._command(b'{"pace": "realtime"}')
+        errors = stream.take_errors()
+        assert "unknown key 'speed_ref_rmp'" in errors[0]
+        assert "expected a JSON object" in errors[1]
+        assert "'load_torque_nm': expected a number" in errors[2]
+        assert "'pace': expected one of fast, realtime" in errors[3]
+        assert len(errors) == 4 and stream.commands_taken == 2 and stream.pace == "realtime"
+        # what a Modbus client reading the holding registers would now see, and what the
+        # session takes between two periods
+        commanded = mailbox.commanded()
+        assert (commanded.speed_ref_rpm, commanded.run, commanded.load_torque_nm) == (2500, False, 0.5)
+        taken = mailbox.take_requests()
+        assert (taken.speed_ref_rpm, taken.run, taken.load_torque_nm, taken.fault_bits) == \
+            (2500, False, 0.5, None)
     finally:
         stream.close()
 

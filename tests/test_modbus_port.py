@@ -26,7 +26,8 @@ REPO = Path(__file__).resolve().parents[1]
 def running_port(request):
     mailbox = ControlMailbox(load_torque_nm=0.0, dc_link_voltage_v=70.0)
     p = ModbusPort(mailbox, port=0, load_torque_limit_nm=5.0, dc_link_voltage_limit_v=100.0,
-                   fault_bits_mask=0x0001_FFFF, isolation=request.param).start()
+                   fault_bits_mask=0x0001_FFFF, speed_ref_limit_rpm=6000.0,
+                   isolation=request.param).start()
     yield p
     p.stop()
     assert not p.running
@@ -36,7 +37,8 @@ def running_port(request):
 def port(running_port):
     """The module's port with its commanded state back to the initial one, nothing pending."""
     mailbox = running_port.mailbox
-    assert mailbox.request(load_torque_nm=0.0, dc_link_voltage_v=70.0, run=False, fault_bits=0)
+    assert mailbox.request(load_torque_nm=0.0, dc_link_voltage_v=70.0, run=False, fault_bits=0,
+                           speed_ref_rpm=0.0)
     mailbox.take_requests()
     assert not mailbox.pending
     return running_port
@@ -78,6 +80,17 @@ def test_block_write_of_all_holding_registers(port, client):
     assert client.read_holding_registers(0, count=5).registers == [500, 7100, 1, 1, 3]
 
 
+def test_speed_reference_is_an_int32_in_hundredths_of_an_rpm(port, client):
+    # -2500.5 rpm = -250050 = 0xFFFC_2F3E, high word first (built by hand from the map)
+    assert not client.write_registers(5, [0xFFFC, 0x2F3E]).isError()
+    assert port.mailbox.take_requests() == ControlRequests(speed_ref_rpm=-2500.5)
+    assert client.read_holding_registers(5, count=2).registers == [0xFFFC, 0x2F3E]
+    # 6000.01 rpm is over the port's limit: refused, nothing posted
+    response = client.write_registers(5, [0x0009, 0x27C1])
+    assert response.isError() and response.exception_code == 3
+    assert port.mailbox.take_requests() is None
+
+
 def test_writing_the_current_value_still_counts(port, client):
     """A plan may have changed the load since; writing 0 again must reach the session."""
     assert not client.write_register(0, 0).isError()
@@ -100,7 +113,7 @@ def test_bad_writes_are_refused_with_illegal_value_and_change_nothing(port, clie
     response = client.write_register(9, 1)  # no such holding register
     assert response.isError() and response.exception_code == 2
     assert port.mailbox.take_requests() is None
-    assert client.read_holding_registers(0, count=5).registers == [0, 7000, 0, 0, 0]
+    assert client.read_holding_registers(0, count=7).registers == [0, 7000, 0, 0, 0, 0, 0]
 
 
 def test_coils_are_the_fault_bits(port, client):

@@ -167,3 +167,21 @@ def test_modbus_write_changes_the_plant_load_while_running():
     load = session.recorder.arrays()["plant.load_torque_nm"][1]
     assert load[0] == 0.0
     assert load[-1] == pytest.approx(0.5, abs=1e-3)
+
+
+def test_a_speed_reference_from_the_mailbox_reaches_the_board():
+    """What Modbus holding registers 5-6 and a live viewer's /cmd write: a COMMAND."""
+    from hil.ports.modbus import ControlMailbox
+
+    mailbox = ControlMailbox(speed_ref_rpm=1500, run=True)
+    with BenchSession(load_profile(), SessionConfig(link="stub")) as session:
+        session.attach_mailbox(mailbox)
+        session.send_command(enable=True, speed_source="encoder", speed_ref_rpm=1500)
+        session.run_periods(4000)
+        assert mailbox.request(speed_ref_rpm=2000)
+        session.run_periods(8000)
+    arrays = session.recorder.arrays()
+    ref = arrays["cmd.speed_ref_rpm"][1]
+    speed = arrays["plant.speed_rpm"][1]
+    assert ref[3999] == 1500 and ref[-1] == 2000
+    assert abs(speed[3999] - 1500) < 30 and abs(speed[-1] - 2000) < 30

@@ -33,7 +33,8 @@ def serve_command(args) -> int:
     profile = load_bench_profile(args.profile)
     config = SessionConfig(link=args.link, mode=args.mode, log_path=args.log)
     mailbox = ControlMailbox(load_torque_nm=profile.load.torque_nm,
-                             dc_link_voltage_v=profile.dc_link.source_voltage_v, run=args.enable)
+                             dc_link_voltage_v=profile.dc_link.source_voltage_v, run=args.enable,
+                             speed_ref_rpm=args.speed_rpm)
     port = None
     if args.modbus and args.modbus != "off":
         host, number = parse_host_port(args.modbus)
@@ -44,13 +45,15 @@ def serve_command(args) -> int:
     chunk = max(1, round(0.01 / profile.control_period_s))  # 10 ms of simulated time
     total = None if args.duration is None else round(args.duration / profile.control_period_s)
     live = None
+    pace = getattr(args, "pace", "fast")
     if getattr(args, "live", None):
         from hil.live import LiveStream, parse_live_address
 
         live_host, live_port = parse_live_address(args.live)
         live = LiveStream(live_host, live_port, period_s=profile.control_period_s,
-                          rate_hz=args.live_rate_hz, mode=args.mode)
-    pace = getattr(args, "pace", "fast") == "realtime"
+                          rate_hz=args.live_rate_hz, mode=args.mode, pace=pace)
+        # viewers' parameters take the Modbus port's path into the session
+        live.attach_mailbox(mailbox)
     try:
         return _serve(args, profile, config, mailbox, port, live, chunk, total, pace)
     finally:
@@ -58,20 +61,25 @@ def serve_command(args) -> int:
             live.close()
 
 
-def _apply_live(session, live, apply_fault_bits) -> None:
-    """Commands viewers published on /cmd, applied between periods like Modbus requests."""
-    for cmd in live.take_commands():
-        change = {k: cmd[k] for k in ("speed_ref_rpm", "enable", "speed_source") if k in cmd}
-        if change:
-            session.send_command(**change)
-        if "load_torque_nm" in cmd:
-            session.plant.load.set_constant(cmd["load_torque_nm"])
-            session.event("live", load_torque_nm=cmd["load_torque_nm"])
-        if "fault_bits" in cmd:
-            apply_fault_bits(session, cmd["fault_bits"])
-    for error in live.errors:
-        print(f"hil serve: live: {error}", file=sys.stderr)
-    live.errors.clear()
+class Pacer:
+    """How long `hil serve` sleeps after a chunk: "realtime" keeps simulated time from running
+    ahead of the wall clock (counted from when the mode was last switched on, so a switch from
+    "fast" does not stall the run while the clock catches up), "fast" never sleeps."""
+
+    def __init__(self, mode: str, period_s: float):
+        self.mode = mode
+        self.period_s = period_s
+        self._origin: tuple[float, int] | None = None   # (wall, periods) when pacing began
+
+    def wait_s(self, ran: int, now: float) -> float:
+        if self.mode != "realtime":
+            self._origin = None
+            return 0.0
+        if self._origin is None:
+            self._origin = (now, ran)
+            return 0.0
+        wall0, ran0 = self._origin
+        return max(0.0, (ran - ran0) * self.period_s - (now - wall0))
 
 
 class _StatusLine:
@@ -99,7 +107,7 @@ class _StatusLine:
               end="", file=sys.stderr, flush=True)
 
 
-def _serve(args, profile, config, mailbox, port, live, chunk, total, pace) -> int:
+def _serve(args, profile, config, mailbox, port, live, chunk, total, pace: str) -> int:
     from hil.faults.injector import apply_fault_bits
 
     with BenchSession(profile, config) as session:
@@ -116,6 +124,7 @@ def _serve(args, profile, config, mailbox, port, live, chunk, total, pace) -> in
               file=sys.stderr)
         ran = 0
         started = time.monotonic()
+        pacer = Pacer(pace, profile.control_period_s)
         status = _StatusLine(session) if sys.stderr.isatty() else None
         from hil.run.console import EventConsole
 
@@ -131,13 +140,13 @@ def _serve(args, profile, config, mailbox, port, live, chunk, total, pace) -> in
                     status.show(ran)
                 n = chunk if total is None else min(chunk, total - ran)
                 if live is not None:
-                    _apply_live(session, live, apply_fault_bits)
+                    for error in live.take_errors():
+                        print(f"hil serve: live: {error}", file=sys.stderr)
+                    pacer.mode = live.pace                  # the viewer may change it
                 ran += session.run_periods(n)
-                if pace:
-                    # paced for a viewer: simulated time does not run ahead of the wall clock
-                    ahead = ran * profile.control_period_s - (time.monotonic() - started)
-                    if ahead > 0:
-                        time.sleep(ahead)
+                wait_s = pacer.wait_s(ran, time.monotonic())
+                if wait_s > 0:
+                    time.sleep(wait_s)
         except KeyboardInterrupt:
             print("hil serve: stopping (Ctrl-C): plant safe-stated, log closed", file=sys.stderr)
         finally:

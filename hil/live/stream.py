@@ -9,8 +9,11 @@ cannot take (its backlog is bounded); the log keeps every period.
 
 A viewer may publish JSON on the client topic `/cmd` (Foxglove's Publish panel):
 `{"speed_ref_rpm": 1500}`, `{"enable": true}`, `{"load_torque_nm": 0.5}`,
-`{"fault_bits": 4}` (the Modbus fault bits). The messages are queued; the session applies
-them between periods (`take_commands`), as it does the Modbus mailbox's requests.
+`{"fault_bits": 4}` (the Modbus fault bits), or `{"pace": "realtime"}` / `{"pace": "fast"}`.
+The parameters go into the session's control mailbox (hil.ports.modbus.ControlMailbox), the
+very one the Modbus port writes, so the session applies a viewer's change between periods as
+it does a Modbus write (and a Modbus read of the holding registers shows it). `pace` is the
+viewer's choice of how `hil serve` runs: paced to real time or as fast as it can.
 
 The server binds to 127.0.0.1 unless another host is given.
 """
@@ -19,8 +22,6 @@ from __future__ import annotations
 import json
 import struct
 import threading
-from collections import deque
-from typing import Any
 
 import foxglove
 from foxglove.websocket import Capability, ServerListener
@@ -30,8 +31,11 @@ from hil.logs.mcap_writer import FIXED_TYPES, fixed_descriptor_set, tag_varint
 COMMAND_TOPIC = "/cmd"
 #: Rows (periods handed over by the recorder) given to the server at once; see the module doc.
 FLUSH_ROWS = 16
-COMMAND_KEYS = {"speed_ref_rpm": float, "enable": bool, "load_torque_nm": float,
-                "fault_bits": int, "speed_source": str}
+#: /cmd key -> (type, the mailbox's request field); `pace` is the stream's own
+COMMAND_KEYS = {"speed_ref_rpm": (float, "speed_ref_rpm"), "enable": (bool, "run"),
+                "load_torque_nm": (float, "load_torque_nm"), "fault_bits": (int, "fault_bits"),
+                "pace": (str, None)}
+PACES = ("fast", "realtime")
 
 
 def parse_live_address(text: str, default_port: int = 8765) -> tuple[str, int]:
@@ -99,7 +103,8 @@ class LiveStream:
     """A Foxglove WebSocket server carrying the run; `every` periods between two rows sent."""
 
     def __init__(self, host: str = "127.0.0.1", port: int = 8765, *, period_s: float,
-                 rate_hz: float = 1000.0, mode: str = "lockstep", name: str = "hil-bench"):
+                 rate_hz: float = 1000.0, mode: str = "lockstep", name: str = "hil-bench",
+                 pace: str = "fast"):
         from plant_rt import TRUTH_FIELDS
 
         from hil.logs.recorder import SENSOR_FIELDS, TELEMETRY_FIELDS
@@ -112,7 +117,9 @@ class LiveStream:
         self._sensor_rows: list[tuple] = []
         self._telemetry_rows: list[tuple] = []
         self.flushes = 0                     # batches handed to the server (tests count them)
-        self._commands: deque[dict[str, Any]] = deque()
+        self._mailbox = None
+        self.pace = pace
+        self.commands_taken = 0              # /cmd messages accepted (tests count them)
         self._lock = threading.Lock()
         self._context = foxglove.Context()
         # Lockstep runs as fast as it can: the viewer is told that simulated time is not wall time.
@@ -176,27 +183,48 @@ class LiveStream:
             self.flushes += 1
 
     # ------------------------------------------------------------- from the viewers
+    def attach_mailbox(self, mailbox) -> None:
+        """Where viewers' parameter changes go: a ControlMailbox (anything with
+        request(**fields) -> bool). Without one, /cmd parameters are refused with an error
+        (a `hil run` takes its stimuli from the plan)."""
+        self._mailbox = mailbox
+
     def _command(self, data: bytes) -> None:
         try:
             msg = json.loads(data)
             if not isinstance(msg, dict):
                 raise ValueError("expected a JSON object")
-            clean = {}
+            request = {}
+            pace = None
             for key, value in msg.items():
                 if key not in COMMAND_KEYS:
                     raise ValueError(f"unknown key '{key}' (known: {', '.join(COMMAND_KEYS)})")
-                clean[key] = COMMAND_KEYS[key](value)
+                kind, field = COMMAND_KEYS[key]
+                if kind is not str and isinstance(value, (str, list, dict)):
+                    raise ValueError(f"'{key}': expected a number, got {value!r}")
+                if field is None:
+                    if value not in PACES:
+                        raise ValueError(f"'pace': expected one of {', '.join(PACES)}, got {value!r}")
+                    pace = value
+                else:
+                    request[field] = kind(value)
+            if request and self._mailbox is None:
+                raise ValueError("this run takes no parameters from viewers (hil serve does)")
+            if request and not self._mailbox.request(**request):
+                raise ValueError("the control mailbox stayed busy for a second; not applied")
         except (ValueError, TypeError) as exc:
             with self._lock:
                 self.errors.append(f"{COMMAND_TOPIC}: {exc}")
             return
         with self._lock:
-            self._commands.append(clean)
+            if pace is not None:
+                self.pace = pace
+            self.commands_taken += 1
 
-    def take_commands(self) -> list[dict[str, Any]]:
+    def take_errors(self) -> list[str]:
+        """Errors in what viewers published since the last call (for the console)."""
         with self._lock:
-            out = list(self._commands)
-            self._commands.clear()
+            out, self.errors = self.errors, []
         return out
 
     def close(self) -> None:

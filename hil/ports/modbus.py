@@ -35,7 +35,7 @@ from pymodbus.framer import FramerType
 from pymodbus.server import ModbusSerialServer, ModbusTcpServer
 from pymodbus.simulator import DataType, SimData, SimDevice
 
-REGISTER_MAP_VERSION = 1
+REGISTER_MAP_VERSION = 2  # 2: speed_reference (holding 5-6)
 _TYPES = {"int16": (1, True), "uint16": (1, False), "int32": (2, True), "uint32": (2, False)}
 
 
@@ -82,6 +82,8 @@ HOLDING_REGISTERS = (
     RegisterField("run", 2, "uint16", 1, "-", "1 run, 0 stop (gates off, the motor coasts); other values refused"),
     RegisterField("fault_injection", 3, "uint32", 1, "bits",
                   "fault-injection bits (meaning defined by the fault-injection module); also coils 0-31"),
+    RegisterField("speed_reference", 5, "int32", 0.01, "rpm",
+                  "the board's speed reference (COMMAND speed_ref_rpm); written values are sent at once"),
 )
 INPUT_REGISTERS = (
     RegisterField("speed", 0, "int32", 0.01, "rpm", "mechanical speed"),
@@ -119,6 +121,7 @@ class ControlRequests:
     dc_link_voltage_v: float | None = None
     run: bool | None = None
     fault_bits: int | None = None
+    speed_ref_rpm: float | None = None
 
 
 class PlantSnapshot(NamedTuple):
@@ -143,7 +146,7 @@ _SNAPSHOT_OF_INPUT = {"speed": "speed_rpm", "i_a": "i_a_a", "i_b": "i_b_a", "i_c
                       "load_torque_applied": "load_torque_nm", "fault_bits_active": "fault_bits"}
 
 
-_WRITTEN_BITS = {"load_torque_nm": 1, "dc_link_voltage_v": 2, "run": 4, "fault_bits": 8}
+_WRITTEN_BITS = {"load_torque_nm": 1, "dc_link_voltage_v": 2, "run": 4, "fault_bits": 8, "speed_ref_rpm": 16}
 _INT_SNAPSHOT_FIELDS = frozenset({"period", "deadline_misses", "state", "fault_bits"})
 
 
@@ -157,6 +160,7 @@ class _Shared(ctypes.Structure):
         ("fault_bits", ctypes.c_uint64),
         ("load_torque_nm", ctypes.c_double),
         ("dc_link_voltage_v", ctypes.c_double),
+        ("speed_ref_rpm", ctypes.c_double),
         ("snapshot_seq", ctypes.c_uint64),  # 0: nothing published yet
         ("snapshot", ctypes.c_double * len(PlantSnapshot._fields)),
         ("requests_served", ctypes.c_uint64),
@@ -177,7 +181,7 @@ class ControlMailbox:
     __slots__ = ("_shared", "_lock", "_seen_seq")
 
     def __init__(self, load_torque_nm: float = 0.0, dc_link_voltage_v: float = 0.0, run: bool = False,
-                 fault_bits: int = 0):
+                 fault_bits: int = 0, speed_ref_rpm: float = 0.0):
         ctx = multiprocessing.get_context("spawn")
         self._shared = ctx.RawValue(_Shared)
         self._lock = ctx.Lock()
@@ -185,6 +189,7 @@ class ControlMailbox:
         sh = self._shared
         sh.load_torque_nm, sh.dc_link_voltage_v = float(load_torque_nm), float(dc_link_voltage_v)
         sh.run, sh.fault_bits = int(bool(run)), int(fault_bits)
+        sh.speed_ref_rpm = float(speed_ref_rpm)
 
     # -- session side -------------------------------------------------------------------------------
     @property
@@ -203,7 +208,8 @@ class ControlMailbox:
         try:
             self._seen_seq = sh.request_seq
             written, sh.written = sh.written, 0
-            values = (sh.load_torque_nm, sh.dc_link_voltage_v, bool(sh.run), int(sh.fault_bits))
+            values = (sh.load_torque_nm, sh.dc_link_voltage_v, bool(sh.run), int(sh.fault_bits),
+                      sh.speed_ref_rpm)
         finally:
             self._lock.release()
         if not written:
@@ -245,7 +251,8 @@ class ControlMailbox:
         """The values last commanded over the port (or the initial ones), all fields set."""
         with self._lock:
             sh = self._shared
-            return ControlRequests(sh.load_torque_nm, sh.dc_link_voltage_v, bool(sh.run), int(sh.fault_bits))
+            return ControlRequests(sh.load_torque_nm, sh.dc_link_voltage_v, bool(sh.run), int(sh.fault_bits),
+                                   sh.speed_ref_rpm)
 
     def snapshot(self) -> PlantSnapshot | None:
         """The latest published snapshot, or None before the first."""
@@ -283,6 +290,7 @@ class _PortConfig:
     load_torque_limit_nm: float | None
     dc_link_voltage_limit_v: float | None
     fault_bits_mask: int
+    speed_ref_limit_rpm: float | None = None
 
 
 class _PortServer:
@@ -371,7 +379,8 @@ class _PortServer:
             current = self.mailbox.commanded()
             regs = (HOLDING_REGISTERS[0].encode(current.load_torque_nm)
                     + HOLDING_REGISTERS[1].encode(current.dc_link_voltage_v)
-                    + [int(current.run)] + HOLDING_REGISTERS[3].encode(current.fault_bits))
+                    + [int(current.run)] + HOLDING_REGISTERS[3].encode(current.fault_bits)
+                    + HOLDING_REGISTERS[4].encode(current.speed_ref_rpm))
             registers[:len(regs)] = regs
             if values is not None:
                 first = address - start_address
@@ -406,6 +415,10 @@ class _PortServer:
                 if value & ~cfg.fault_bits_mask:
                     return ExcCodes.ILLEGAL_VALUE
                 requests["fault_bits"] = int(value)
+            elif name == "speed_reference":
+                if cfg.speed_ref_limit_rpm is not None and abs(value) > cfg.speed_ref_limit_rpm:
+                    return ExcCodes.ILLEGAL_VALUE
+                requests["speed_ref_rpm"] = round(value, 2)
         if requests and not self.mailbox.request(**requests):
             return ExcCodes.DEVICE_BUSY
         return None
@@ -457,14 +470,15 @@ class ModbusPort:
     asyncio loop; "process" runs it in a spawned process, so that handling a request
     never holds this process's GIL (in a thread each request stalls the session for
     about 0.1-0.6 ms: see docs/modbus.md). Writes outside ``load_torque_limit_nm``
-    (absolute), ``dc_link_voltage_limit_v`` or ``fault_bits_mask`` are refused with
-    Modbus exception 3 (illegal data value).
+    (absolute), ``dc_link_voltage_limit_v``, ``fault_bits_mask`` or ``speed_ref_limit_rpm``
+    (absolute) are refused with Modbus exception 3 (illegal data value).
     """
 
     def __init__(self, mailbox: ControlMailbox, host: str | None = "127.0.0.1", port: int = 5020,
                  rtu_port: str | None = None, *, rtu_baudrate: int = 19200, rtu_device_id: int = 1,
                  load_torque_limit_nm: float | None = None,
                  dc_link_voltage_limit_v: float | None = None, fault_bits_mask: int = 0xFFFFFFFF,
+                 speed_ref_limit_rpm: float | None = None,
                  isolation: str = "thread", start_timeout_s: float = 10.0):
         if host is None and rtu_port is None:
             raise ValueError("ModbusPort: give a TCP host or an RTU serial port (or both)")
@@ -479,7 +493,7 @@ class ModbusPort:
         self.isolation = isolation
         self.start_timeout_s = start_timeout_s
         self._config = _PortConfig(host, port, rtu_port, rtu_baudrate, rtu_device_id, load_torque_limit_nm,
-                                   dc_link_voltage_limit_v, fault_bits_mask)
+                                   dc_link_voltage_limit_v, fault_bits_mask, speed_ref_limit_rpm)
         self.tcp_address: tuple[str, int] | None = None
         self._thread: threading.Thread | None = None
         self._loop: asyncio.AbstractEventLoop | None = None

@@ -648,8 +648,13 @@ class BenchSession:
         if req.dc_link_voltage_v is not None and req.dc_link_voltage_v > 0:
             plant.set_dc_voltage(req.dc_link_voltage_v)
             self._event("modbus", {"dc_link_voltage_v": req.dc_link_voltage_v})
+        change = {}
         if req.run is not None and req.run != self.command_state.enable:
-            self.send_command(enable=req.run)
+            change["enable"] = req.run
+        if req.speed_ref_rpm is not None:
+            change["speed_ref_rpm"] = req.speed_ref_rpm
+        if change:
+            self.send_command(**change)
         if req.fault_bits is not None and self._on_fault_bits is not None:
             self._on_fault_bits(req.fault_bits)
 
