@@ -28,6 +28,15 @@ against the switched-circuit reference before; the step now ends there, nothing 
 This is what makes the safe state at 3000 rpm decay to zero and then stay there while the line
 back-EMF is below the 70 V link.
 
+The load torque within an interval is the linear piece set by set_load_segment (the plant cuts
+its intervals at the profile's knots), plus the speed term.
+
+C kernel: with plant_rt.ckernel's extension built (and HIL_PLANT_PURE_PYTHON unset), integrate()
+and begin()'s settling run in C (plant_rt/c/_plantnet.c, the same operations in the same order),
+one call per interval; this Python code is the reference and the fallback (``ckernel = None``).
+After a C call only the phase states, the counters and ``vdc`` are updated (the per-evaluation
+values ``cur``, ``te``, ``vx`` are the Python path's).
+
 An open phase (a broken wire or connector between leg x and the motor, a fault) keeps phase x
 in O whatever its leg does: its terminal floats with no diode to catch it, so it has no turn-on
 event and takes no part in a release pair; the other two phases carry opposite currents.
@@ -37,6 +46,7 @@ from __future__ import annotations
 import math
 from math import cos, sin
 
+from plant_rt import ckernel
 from plant_rt.dc_link import DcLink
 from plant_rt.inverter import H, L, N, O, P, PHASE_AXES, SQRT3, InverterParams
 from plant_rt.load import Load
@@ -76,6 +86,23 @@ class Network:
         # per phase: +1 while |i| > i_knee at the last accepted state, -1 inside the knee
         # (which way the knee event looks); only with a device drop
         self._knee_side = [0, 0, 0]
+        # load profile over the interval: value v0 at t_a, slope (set_load_segment)
+        self._tl = (0.0, 0.0, 0.0)
+        #: the C kernel (plant_rt.ckernel.KERNEL), None for this Python implementation
+        self.ckernel = ckernel.KERNEL
+
+    def set_load_segment(self, t_a: float, v0: float, slope: float) -> None:
+        """The load profile is v0 + slope (t - t_a) over the coming interval (no knot in it)."""
+        self._tl = (t_a, v0, slope)
+
+    def _cfg(self) -> tuple:
+        """The parameters the C kernel takes besides the motor's constants."""
+        dc, load = self.dc, self.load
+        t_a, v0, slope = self._tl
+        return (2.0 if dc.dynamic else 1.0 if dc.resistive else 0.0, dc.source_v, dc.rs, dc.ic,
+                1.0 if dc.unidirectional else 0.0, self.ud, self.knee,
+                1.0 if load.locked else 0.0, load.kw, t_a, v0, slope,
+                -1.0 if self.open_phase is None else float(self.open_phase))
 
     def set_open_phase(self, phase: int | None) -> None:
         """Phase 0, 1 or 2 disconnected from its leg (None: all connected)."""
@@ -122,6 +149,12 @@ class Network:
                 kinds.append(O)
         self._configure(kinds)
         if self.zero:                   # only a floating phase can start to conduct
+            if self.ckernel is not None:
+                y[:], kinds, events = self.ckernel.settle(self.motor._k, self._cfg(), self.kinds,
+                                                          t, y)
+                self._configure(list(kinds))
+                self.events += events
+                return
             self._project(y)
             self._settle(t, y)
 
@@ -271,7 +304,8 @@ class Network:
         if self.load.locked:
             dw = 0.0
         else:
-            dw = (te - m.b * w - self.load.torque(t, w)) * m.ij
+            t_a, v0, slope = self._tl
+            dw = (te - m.b * w - ((v0 + slope * (t - t_a)) + self.load.kw * w)) * m.ij
         return dpa, dpb, dw, w, dc.dv_dt(v, idc), va, vb, idc
 
     def _release(self, va: float, vb: float, vdc: float) -> None:
@@ -364,6 +398,13 @@ class Network:
     def integrate(self, t0: float, t1: float, y: list[float], h_max: float,
                   acc: list[float]) -> list[float]:
         """Integrates [t0, t1] (absolute s) from y; adds int u_alpha, u_beta, i_dc dt to acc."""
+        if self.ckernel is not None:
+            y, kinds, events, overflows, self.vdc = self.ckernel.integrate(
+                self.motor._k, self._cfg(), self.kinds, t0, t1, y, h_max, acc)
+            self._configure(list(kinds))
+            self.events += events
+            self.event_overflows += overflows
+            return y
         n = max(1, math.ceil((t1 - t0) / h_max - 1e-9))
         if self.all_zero:
             coasted = self._coast(t0, t1, y, n, acc)
@@ -416,7 +457,8 @@ class Network:
         m, dc, load = self.motor, self.dc, self.load
         pa0, pb0, w, th, v = y
         h = (t1 - t0) / n
-        v0, slope, _ = load.segment(t0)
+        t_a, v_a, slope = self._tl
+        v0 = v_a + slope * (t0 - t_a)
         kw, b, ij = load.kw, m.b, m.ij
         locked = load.locked
         for i in range(n):

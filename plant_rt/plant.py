@@ -23,6 +23,10 @@ Fault hooks (hil/faults/injector.py drives them; each costs nothing while it is 
 
 Slowly varying quantities (ripple, ramps) are held constant over a period at their value at
 the period's midpoint: a zero-order hold at 20 kHz, exact for the integration of that period.
+
+The slow paths (the PWM period as constant-vector pieces, the general network) run in the C
+kernel plant_rt/c/_plantnet.c when it is built (plant_rt.ckernel; HIL_PLANT_PURE_PYTHON=1 or
+use_c_kernel(False) keeps this Python code, the reference).
 """
 from __future__ import annotations
 
@@ -30,6 +34,7 @@ import dataclasses
 import math
 from math import cos, pi, sin
 
+from plant_rt import ckernel
 from plant_rt.circuit import S32, ZERO_CURRENT_A, Network
 from plant_rt.dc_link import DcLink
 from plant_rt.inverter import (
@@ -124,7 +129,28 @@ class Plant:
         self._ripple: tuple[float, float] | None = None                   # amplitude, Hz
         self._param_ramps: dict[str, tuple[float, float, float, float, int]] = {}
         self._vectors: list = [None] * 64
+        self._ckernel = ckernel.KERNEL
+        self.network.ckernel = self._ckernel
         self._rebuild()
+
+    @property
+    def c_kernel(self) -> bool:
+        """True when the slow paths run in the C kernel (plant_rt.ckernel)."""
+        return self._ckernel is not None
+
+    def use_c_kernel(self, on) -> None:
+        """Runs the slow paths in the C kernel (True: ImportError when it is not built) or in
+        Python (False: the reference); an object with the extension's functions is used as
+        the kernel (tests wrap the extension so)."""
+        kernel = None
+        if on is True:
+            kernel = ckernel.EXTENSION
+            if kernel is None:
+                raise ImportError(ckernel.UNAVAILABLE_REASON)
+        elif on is not False and on is not None:
+            kernel = on
+        self._ckernel = kernel
+        self.network.ckernel = kernel
 
     # --------------------------------------------------------------- helpers
     def _rebuild(self) -> None:
@@ -278,6 +304,7 @@ class Plant:
                         net.set_driven(vec[4])
                         self._net_dirty = False
                 elif not (fast and self._diode_interval(y, word, end - a, v0, slope, acc)):
+                    net.set_load_segment(t0 + a, v0, slope)
                     net.begin(t0 + a, y, _LEG_STATES[word])
                     y = net.integrate(t0 + a, t0 + end, y, self._h_max, acc)
                     self._net_dirty = True
@@ -316,6 +343,26 @@ class Plant:
         m = self.motor
         inv = self.inverter
         ud = inv.device_drop_v
+        kernel = self._ckernel
+        if kernel is not None:
+            if self.load.version != self._load_key:
+                self._refresh_load(t0)
+            vdc = self.dc_link.source_v
+            done = kernel.leg_period(m._k, m.ld, m.spm, T, windows, ud, inv.device_knee_a, vdc,
+                                     (self._pa, self._pb, self._w, self._th), self._h_max, v0,
+                                     slope, self._bw)
+            if done is False:
+                return False
+            if done is not None:        # None: more edges than the kernel holds (Python's turn)
+                self._pa, self._pb, self._w, self._th, ua_int, ub_int, q, h = done
+                self._u_int = (ua_int, ub_int)
+                self._idc_int = q
+                self._zero_current = False
+                self._vdc = vdc
+                if self._net_dirty:
+                    self.network.set_driven(_LEG_STATES[_LEG_WORDS[h]])
+                    self._net_dirty = False
+                return True
         y_pa, y_pb, y_w, y_th = self._pa, self._pb, self._w, self._th
         need = []                       # legs whose current sign matters
         signs = [0.0, 0.0, 0.0]

@@ -89,6 +89,7 @@ if [ ! -f "$stamp" ] || [ requirements.lock -nt "$stamp" ] || [ pyproject.toml -
 fi
 
 make -s -C protocol/c
+make -s -C plant_rt/c
 make -s -C firmware_stub
 # Byte-code for the bench's own packages, as a non-editable pip install would write it: a
 # shell that sets PYTHONDONTWRITEBYTECODE (this CI machine's does) otherwise compiles every

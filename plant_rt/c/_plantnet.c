@@ -1,0 +1,1270 @@
+/*
+ * _plantnet: the plant's hot numerics in C, as a CPython extension (plant_rt/ckernel.py is its
+ * front end; plant_rt/circuit.py and plant_rt/plant.py stay the reference and the fallback).
+ *
+ *   integrate   Network.integrate: the general network (inverter legs driven or through their
+ *               diodes, DC link, stator, rotor) over one constant-switch interval by RK4 with
+ *               event location (a diode current reaching zero, a floating terminal reaching a
+ *               rail, a line back-EMF overcoming the rails with no current, a driven current
+ *               crossing the device-drop knee), the state transitions they cause, the coast
+ *               with no current at all.
+ *   settle      Network._settle after Network.begin: the turn-on conditions that hold now.
+ *   leg_period  Plant._leg_period: a PWM period as constant-vector pieces from the legs'
+ *               switch windows, integrated piece by piece (MotorModel.advance_pieces), with
+ *               the sign check of Plant._signs_hold.
+ *
+ * Why hand-written C: with PWM, dead time and device drop the plant spends its time in the
+ * Python interpreter's per-call overhead (about 50 RHS evaluations per 50 us period, each a few
+ * microseconds), not in arithmetic; and no maintained library integrates this switched network
+ * with these events in a way that keeps the Python reference's step sequence. Every function
+ * here mirrors its Python original operation by operation (same order of operations, compiled
+ * with -ffp-contract=off, the same libm cos/sin), so the two agree to rounding and a run is
+ * deterministic.
+ *
+ * Plain C99 and the CPython API; no state between calls (everything comes in as arguments).
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+
+#include <math.h>
+#include <string.h>
+
+/* Leg / phase states (plant_rt/inverter.py). */
+enum { K_H = 0, K_L = 1, K_P = 2, K_N = 3, K_O = 4 };
+/* Event tags (plant_rt/circuit.py event_values). */
+enum { T_I = 0, T_HI = 1, T_LO = 2, T_REL = 3, T_K = 4 };
+
+#define ZERO_CURRENT_A 1e-9
+#define MAX_EVENTS_PER_INTERVAL 64
+#define MAX_G 10
+
+static double SQRT3, S32, INV_SQRT3;
+static const double TWO_THIRDS = 2.0 / 3.0;
+static double AX[3][2];
+
+typedef struct {
+    /* motor (MotorModel._k) */
+    double p, r, psim, ild, ilq, ij, b, kt;
+    /* DC link: mode 0 ideal, 1 resistive, 2 dynamic */
+    int dc_mode, unidir;
+    double src_v, rs, ic;
+    /* inverter */
+    double ud, knee;
+    /* load: torque = v0 + slope (t - t_a) + kw w over the interval */
+    int locked;
+    double kw, tl_t, tl_v0, tl_slope;
+    int open_phase; /* -1: none */
+} cfg_t;
+
+typedef struct {
+    double g;
+    int tag, x;
+} ev_t;
+
+typedef struct {
+    cfg_t c;
+    int kinds[3];
+    int zero[3];
+    int nzero;
+    int all_zero;
+    double cur[3];
+    double vx, vdc, g_release, emf_a, emf_b, te;
+    int rel_out, rel_into;
+    int knee_side[3];
+    long events, overflows;
+} net_t;
+
+/* ------------------------------------------------------------------ DC link */
+
+static double dc_voltage(const cfg_t *c, double v, double idc)
+{
+    if (c->dc_mode == 2) {
+        return v;
+    }
+    if (c->dc_mode == 1) {
+        return c->src_v - c->rs * idc;
+    }
+    return c->src_v;
+}
+
+static double dc_dv_dt(const cfg_t *c, double v, double idc)
+{
+    if (c->dc_mode != 2) {
+        return 0.0;
+    }
+    double i = (c->src_v - v) / c->rs;
+    if (c->unidir && i < 0.0) {
+        i = 0.0;
+    }
+    return (i - idc) * c->ic;
+}
+
+/* ------------------------------------------------------------------ leg states */
+
+static void configure(net_t *n, const int kinds[3])
+{
+    int k[3] = {kinds[0], kinds[1], kinds[2]};
+    int nz = 0;
+    for (int x = 0; x < 3; x++) {
+        if (k[x] == K_O) {
+            nz++;
+        }
+    }
+    if (nz >= 2) {
+        for (int x = 0; x < 3; x++) {
+            if (k[x] == K_P || k[x] == K_N) {
+                k[x] = K_O;
+            }
+        }
+    }
+    n->nzero = 0;
+    for (int x = 0; x < 3; x++) {
+        n->kinds[x] = k[x];
+        if (k[x] == K_O) {
+            n->zero[n->nzero++] = x;
+        }
+    }
+    n->all_zero = n->nzero >= 2;
+}
+
+static void project_phase(const net_t *n, int x, double *y)
+{
+    const cfg_t *m = &n->c;
+    double e = m->p * y[3];
+    double c = cos(e), s = sin(e);
+    double ex0 = AX[x][0], ex1 = AX[x][1];
+    double i_d = (c * y[0] + s * y[1] - m->psim) * m->ild;
+    double i_q = (c * y[1] - s * y[0]) * m->ilq;
+    double ia = c * i_d - s * i_q;
+    double ib = s * i_d + c * i_q;
+    double ix = ex0 * ia + ex1 * ib;
+    double rd = c * ex0 + s * ex1;
+    double rq = c * ex1 - s * ex0;
+    double delta = -ix / (rd * rd * m->ild + rq * rq * m->ilq);
+    y[0] += delta * ex0;
+    y[1] += delta * ex1;
+}
+
+static void project(const net_t *n, double *y)
+{
+    if (n->nzero == 0) {
+        return;
+    }
+    double e = n->c.p * y[3];
+    double c = cos(e), s = sin(e);
+    if (n->all_zero) {
+        y[0] = n->c.psim * c;
+        y[1] = n->c.psim * s;
+        return;
+    }
+    project_phase(n, n->zero[0], y);
+}
+
+/* ------------------------------------------------------------------ RHS */
+
+/* out: dpsi_a, dpsi_b, dw, dtheta, dv_dc, u_alpha, u_beta, i_dc */
+static void rhs(net_t *n, double t, const double *y, double *out)
+{
+    const cfg_t *m = &n->c;
+    double pa = y[0], pb = y[1], w = y[2], th = y[3], v = y[4];
+    double e = m->p * th;
+    double c = cos(e);
+    double s = sin(e);
+    double we = m->p * w;
+    double dpa, dpb, te, idc, vdc, va, vb;
+    if (n->all_zero) {
+        va = -we * m->psim * s;
+        vb = we * m->psim * c;
+        dpa = va;
+        dpb = vb;
+        te = 0.0;
+        idc = 0.0;
+        vdc = dc_voltage(m, v, 0.0);
+        n->cur[0] = n->cur[1] = n->cur[2] = 0.0;
+        n->emf_a = va;
+        n->emf_b = vb;
+    } else {
+        double pd = c * pa + s * pb;
+        double pq = c * pb - s * pa;
+        double i_d = (pd - m->psim) * m->ild;
+        double i_q = pq * m->ilq;
+        double ia = c * i_d - s * i_q;
+        double ib = s * i_d + c * i_q;
+        double cur[3] = {ia, -0.5 * ia + S32 * ib, -0.5 * ia - S32 * ib};
+        idc = 0.0;
+        for (int x = 0; x < 3; x++) {
+            if (n->kinds[x] == K_H || n->kinds[x] == K_N) {
+                idc += cur[x];
+            }
+        }
+        vdc = dc_voltage(m, v, idc);
+        double ud = m->ud;
+        double vt[3] = {0.0, 0.0, 0.0};
+        for (int x = 0; x < 3; x++) {
+            int k = n->kinds[x];
+            if (k == K_H || k == K_L) {
+                double drop = 0.0;
+                if (ud != 0.0) {
+                    double z = cur[x] / m->knee;
+                    drop = ud * (z > 1.0 ? 1.0 : z < -1.0 ? -1.0 : z);
+                }
+                vt[x] = (k == K_H ? vdc : 0.0) - drop;
+            } else if (k == K_P) {
+                vt[x] = -ud;
+            } else if (k == K_N) {
+                vt[x] = vdc + ud;
+            }
+        }
+        va = (2.0 * vt[0] - vt[1] - vt[2]) / 3.0;
+        vb = (vt[1] - vt[2]) * INV_SQRT3;
+        if (n->nzero) {
+            double ex0 = AX[n->zero[0]][0], ex1 = AX[n->zero[0]][1];
+            double did = (c * va + s * vb - m->r * i_d + we * pq) * m->ild;
+            double diq = (c * vb - s * va - m->r * i_q - we * pd) * m->ilq;
+            double rd = c * ex0 + s * ex1;
+            double rq = c * ex1 - s * ex0;
+            double g0 = rd * did + rq * diq + we * (ex1 * ia - ex0 * ib);
+            double vx = -g0 / (TWO_THIRDS * (rd * rd * m->ild + rq * rq * m->ilq));
+            va += TWO_THIRDS * ex0 * vx;
+            vb += TWO_THIRDS * ex1 * vx;
+            n->vx = vx;
+        }
+        dpa = va - m->r * ia;
+        dpb = vb - m->r * ib;
+        te = m->kt * (pd * i_q - pq * i_d);
+        n->cur[0] = cur[0];
+        n->cur[1] = cur[1];
+        n->cur[2] = cur[2];
+    }
+    n->vdc = vdc;
+    n->te = te;
+    double dw;
+    if (m->locked) {
+        dw = 0.0;
+    } else {
+        dw = (te - m->b * w - ((m->tl_v0 + m->tl_slope * (t - m->tl_t)) + m->kw * w)) * m->ij;
+    }
+    out[0] = dpa;
+    out[1] = dpb;
+    out[2] = dw;
+    out[3] = w;
+    out[4] = dc_dv_dt(m, v, idc);
+    out[5] = va;
+    out[6] = vb;
+    out[7] = idc;
+}
+
+static void release(net_t *n, double va, double vb, double vdc)
+{
+    double ud = n->c.ud;
+    double up[3], lo[3];
+    for (int x = 0; x < 3; x++) {
+        double ex = AX[x][0] * va + AX[x][1] * vb;
+        int k = n->kinds[x];
+        if (k == K_O) {
+            up[x] = ex - vdc - ud;
+            lo[x] = ex + ud;
+        } else {
+            double rail = k == K_H ? vdc : 0.0;
+            up[x] = ex - rail;
+            lo[x] = ex - rail;
+        }
+    }
+    static const int pairs[6][2] = {{0, 1}, {0, 2}, {1, 0}, {1, 2}, {2, 0}, {2, 1}};
+    double best = -INFINITY;
+    int bo = 0, bi = 1;
+    int cut = n->c.open_phase;
+    for (int j = 0; j < 6; j++) {
+        int x = pairs[j][0], yy = pairs[j][1];
+        if (x == cut || yy == cut) {
+            continue;
+        }
+        double g = up[x] - lo[yy];
+        if (g > best) {
+            best = g;
+            bo = x;
+            bi = yy;
+        }
+    }
+    n->g_release = best;
+    n->rel_out = bo;
+    n->rel_into = bi;
+}
+
+static int event_values(net_t *n, ev_t *out)
+{
+    int k = 0;
+    if (n->all_zero) {
+        release(n, n->emf_a, n->emf_b, n->vdc);
+        out[0].g = n->g_release;
+        out[0].tag = T_REL;
+        out[0].x = 0;
+        return 1;
+    }
+    for (int x = 0; x < 3; x++) {
+        if (n->kinds[x] == K_P) {
+            out[k].g = -n->cur[x];
+            out[k].tag = T_I;
+            out[k++].x = x;
+        } else if (n->kinds[x] == K_N) {
+            out[k].g = n->cur[x];
+            out[k].tag = T_I;
+            out[k++].x = x;
+        }
+    }
+    if (n->nzero && n->zero[0] != n->c.open_phase) {
+        int x = n->zero[0];
+        out[k].g = n->vx - n->vdc - n->c.ud;
+        out[k].tag = T_HI;
+        out[k++].x = x;
+        out[k].g = -n->c.ud - n->vx;
+        out[k].tag = T_LO;
+        out[k++].x = x;
+    }
+    if (n->c.ud != 0.0) {
+        for (int x = 0; x < 3; x++) {
+            if ((n->kinds[x] == K_H || n->kinds[x] == K_L) && n->knee_side[x]) {
+                out[k].g = n->knee_side[x] * (n->c.knee - fabs(n->cur[x]));
+                out[k].tag = T_K;
+                out[k++].x = x;
+            }
+        }
+    }
+    return k;
+}
+
+static void note_knee_sides(net_t *n)
+{
+    if (n->c.ud != 0.0) {
+        for (int x = 0; x < 3; x++) {
+            n->knee_side[x] = fabs(n->cur[x]) > n->c.knee ? 1 : -1;
+        }
+    }
+}
+
+/* ------------------------------------------------------------------ integration */
+
+static void rk4(net_t *n, double t, const double *y, double h, const double *k1, double *out,
+                double *quad)
+{
+    double k2[8], k3[8], k4[8], z[5];
+    double h2 = 0.5 * h;
+    for (int i = 0; i < 5; i++) {
+        z[i] = y[i] + h2 * k1[i];
+    }
+    rhs(n, t + h2, z, k2);
+    for (int i = 0; i < 5; i++) {
+        z[i] = y[i] + h2 * k2[i];
+    }
+    rhs(n, t + h2, z, k3);
+    for (int i = 0; i < 5; i++) {
+        z[i] = y[i] + h * k3[i];
+    }
+    rhs(n, t + h, z, k4);
+    double h6 = h / 6.0;
+    for (int i = 0; i < 5; i++) {
+        out[i] = y[i] + h6 * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i]);
+    }
+    for (int i = 0; i < 3; i++) {
+        quad[i] = h6 * (k1[5 + i] + 2.0 * (k2[5 + i] + k3[5 + i]) + k4[5 + i]);
+    }
+    if (n->c.locked) {
+        out[2] = 0.0;
+    }
+}
+
+static int state_after(net_t *n, double t, const double *y, double h, const double *k1,
+                       double *y1, double *quad, ev_t *g)
+{
+    double scratch[8];
+    rk4(n, t, y, h, k1, y1, quad);
+    rhs(n, t + h, y1, scratch);
+    return event_values(n, g);
+}
+
+static void transition(net_t *n, double t, int tag, int x, double *y)
+{
+    if (tag == T_K) {
+        n->events++;
+        return;
+    }
+    int kinds[3] = {n->kinds[0], n->kinds[1], n->kinds[2]};
+    if (tag == T_I) {
+        kinds[x] = K_O;
+    } else if (tag == T_HI) {
+        kinds[x] = K_N;
+    } else if (tag == T_LO) {
+        kinds[x] = K_P;
+    } else {
+        double scratch[8];
+        ev_t g[MAX_G];
+        rhs(n, t, y, scratch);
+        event_values(n, g);
+        if (kinds[n->rel_out] == K_O) {
+            kinds[n->rel_out] = K_N;
+        }
+        if (kinds[n->rel_into] == K_O) {
+            kinds[n->rel_into] = K_P;
+        }
+    }
+    configure(n, kinds);
+    project(n, y);
+    n->events++;
+}
+
+static void settle(net_t *n, double t, double *y)
+{
+    for (int it = 0; it < 6; it++) {
+        double scratch[8];
+        ev_t g[MAX_G];
+        rhs(n, t, y, scratch);
+        note_knee_sides(n);
+        int ng = event_values(n, g);
+        int best = -1;
+        for (int j = 0; j < ng; j++) {
+            if (g[j].tag != T_I && g[j].tag != T_K && g[j].g > 0.0 &&
+                (best < 0 || g[j].g > g[best].g)) {
+                best = j;
+            }
+        }
+        if (best < 0) {
+            return;
+        }
+        transition(n, t, g[best].tag, g[best].x, y);
+    }
+}
+
+static double locate(net_t *n, double t, const double *y, double h, const double *k1, int j,
+                     double ga, double gb)
+{
+    if (ga > 0.0) {
+        return 0.0;
+    }
+    double a = 0.0, b = h;
+    double fa = ga, fb = gb;
+    int side = 0;
+    double tol = 1e-15 + 1e-11 * h;
+    for (int it = 0; it < 80; it++) {
+        if (b - a <= tol) {
+            break;
+        }
+        double x = fb != fa ? b - fb * (b - a) / (fb - fa) : 0.5 * (a + b);
+        if (!(a < x && x < b)) {
+            x = 0.5 * (a + b);
+        }
+        double y1[5], quad[3];
+        ev_t g[MAX_G];
+        state_after(n, t, y, x, k1, y1, quad, g);
+        double fx = g[j].g;
+        if (fx > 0.0) {
+            b = x;
+            fb = fx;
+            if (side == 1) {
+                fa *= 0.5;
+            }
+            side = 1;
+        } else {
+            a = x;
+            fa = fx;
+            if (side == -1) {
+                fb *= 0.5;
+            }
+            side = -1;
+        }
+    }
+    return b;
+}
+
+/* Network._coast: 1 and out filled when no conducting path opens, else 0. */
+static int coast(net_t *n, double t0, double t1, const double *y, long steps, double *acc,
+                 double *out)
+{
+    const cfg_t *m = &n->c;
+    double pa0 = y[0], pb0 = y[1], w = y[2], th = y[3], v = y[4];
+    double h = (t1 - t0) / (double)steps;
+    /* load.segment(t0): the interval's segment starts at tl_t */
+    double v0 = m->tl_v0 + m->tl_slope * (t0 - m->tl_t);
+    double slope = m->tl_slope;
+    double kw = m->kw, b = m->b, ij = m->ij;
+    for (long i = 0; i < steps; i++) {
+        double t = (double)i * h;
+        double k1w, k2w, k3w, k4w;
+        if (m->locked) {
+            k1w = k2w = k3w = k4w = 0.0;
+            w = 0.0;
+        } else {
+            k1w = -(b * w + v0 + slope * t + kw * w) * ij;
+            double w2 = w + 0.5 * h * k1w;
+            k2w = -(b * w2 + v0 + slope * (t + 0.5 * h) + kw * w2) * ij;
+            double w3 = w + 0.5 * h * k2w;
+            k3w = -(b * w3 + v0 + slope * (t + 0.5 * h) + kw * w3) * ij;
+            double w4 = w + h * k3w;
+            k4w = -(b * w4 + v0 + slope * (t + h) + kw * w4) * ij;
+        }
+        th += h / 6.0 * (w + 2.0 * (w + 0.5 * h * k1w) + 2.0 * (w + 0.5 * h * k2w) + w + h * k3w);
+        w += h / 6.0 * (k1w + 2.0 * (k2w + k3w) + k4w);
+        if (m->dc_mode == 2) {
+            double q1 = dc_dv_dt(m, v, 0.0);
+            double q2 = dc_dv_dt(m, v + 0.5 * h * q1, 0.0);
+            double q3 = dc_dv_dt(m, v + 0.5 * h * q2, 0.0);
+            double q4 = dc_dv_dt(m, v + h * q3, 0.0);
+            v += h / 6.0 * (q1 + 2.0 * (q2 + q3) + q4);
+        }
+    }
+    double e = m->p * th;
+    out[0] = m->psim * cos(e);
+    out[1] = m->psim * sin(e);
+    out[2] = w;
+    out[3] = th;
+    out[4] = v;
+    double scratch[8];
+    rhs(n, t1, out, scratch);
+    release(n, n->emf_a, n->emf_b, n->vdc);
+    if (n->g_release > 0.0) {
+        return 0;
+    }
+    acc[0] += out[0] - pa0;
+    acc[1] += out[1] - pb0;
+    return 1;
+}
+
+static void net_integrate(net_t *n, double t0, double t1, double *y, double h_max, double *acc)
+{
+    double ratio = (t1 - t0) / h_max - 1e-9;
+    double cn = ceil(ratio);
+    long steps = cn < 1.0 ? 1 : (long)cn;
+    if (n->all_zero) {
+        double out[5];
+        if (coast(n, t0, t1, y, steps, acc, out)) {
+            memcpy(y, out, sizeof out);
+            return;
+        }
+    }
+    double h_nom = (t1 - t0) / (double)steps;
+    double t = t0;
+    int budget = MAX_EVENTS_PER_INTERVAL;
+    double k1[8];
+    ev_t g0[MAX_G], g1[MAX_G];
+    rhs(n, t, y, k1);
+    note_knee_sides(n);
+    int n0 = event_values(n, g0);
+    while (t1 - t > 1e-12 * h_nom) {
+        double h = h_nom < t1 - t ? h_nom : t1 - t;
+        if (t + h > t1 - 1e-9 * h_nom) {
+            h = t1 - t;
+        }
+        double y1[5], quad[3];
+        int n1 = state_after(n, t, y, h, k1, y1, quad, g1);
+        int fired[MAX_G];
+        int nf = 0;
+        if (budget > 0 && n1 == n0) {
+            for (int j = 0; j < n0; j++) {
+                double a = g0[j].g, b = g1[j].g;
+                if (b > 0.0 && (a <= 0.0 || b > a)) {
+                    fired[nf++] = j;
+                }
+            }
+        }
+        if (nf) {
+            budget--;
+            if (budget == 0) {
+                n->overflows++;
+            }
+            double tau = 0.0;
+            int jbest = -1;
+            for (int f = 0; f < nf; f++) {
+                int j = fired[f];
+                double tj = locate(n, t, y, h, k1, j, g0[j].g, g1[j].g);
+                if (jbest < 0 || tj < tau) { /* fired is ascending: ties keep the smaller j */
+                    tau = tj;
+                    jbest = j;
+                }
+            }
+            double yn[5];
+            rk4(n, t, y, tau, k1, yn, quad);
+            memcpy(y, yn, sizeof yn);
+            for (int i = 0; i < 3; i++) {
+                acc[i] += quad[i];
+            }
+            t += tau;
+            transition(n, t, g0[jbest].tag, g0[jbest].x, y);
+            settle(n, t, y);
+        } else {
+            memcpy(y, y1, sizeof y1);
+            for (int i = 0; i < 3; i++) {
+                acc[i] += quad[i];
+            }
+            t += h;
+            if (n->nzero) {
+                project(n, y);
+            }
+        }
+        rhs(n, t, y, k1);
+        note_knee_sides(n);
+        n0 = event_values(n, g0);
+    }
+}
+
+/* ------------------------------------------------------------------ leg period */
+
+#define MAX_WIN 16
+#define MAX_TOG 96
+
+typedef struct {
+    double len, va, vb, ga, gb;
+} piece_t;
+
+/* MotorModel.advance: n RK4 steps of length h at constant (va, vb), Ld != Lq form. */
+static void advance_general(const cfg_t *m, double *st, double va, double vb, double h, long n,
+                            double tl0, double tl_slope, double bw)
+{
+    double p = m->p, r = m->r, psim = m->psim, ild = m->ild, ilq = m->ilq, ij = m->ij, kt = m->kt;
+    double pa = st[0], pb = st[1], w = st[2], th = st[3];
+    double h2 = 0.5 * h;
+    double h6 = h / 6.0;
+    double t = 0.0;
+    for (long i = 0; i < n; i++) {
+        double tl1 = tl0 + tl_slope * t;
+        double tl2 = tl1 + tl_slope * h2;
+        double tl4 = tl1 + tl_slope * h;
+        double e = p * th;
+        double c = cos(e);
+        double s = sin(e);
+        double pd = c * pa + s * pb;
+        double pq = c * pb - s * pa;
+        double i_d = (pd - psim) * ild;
+        double i_q = pq * ilq;
+        double d1a = va - r * (c * i_d - s * i_q);
+        double d1b = vb - r * (s * i_d + c * i_q);
+        double d1w = (kt * (pd * i_q - pq * i_d) - bw * w - tl1) * ij;
+        double w2 = w + h2 * d1w;
+        e = p * (th + h2 * w);
+        c = cos(e);
+        s = sin(e);
+        double xa = pa + h2 * d1a;
+        double xb = pb + h2 * d1b;
+        pd = c * xa + s * xb;
+        pq = c * xb - s * xa;
+        i_d = (pd - psim) * ild;
+        i_q = pq * ilq;
+        double d2a = va - r * (c * i_d - s * i_q);
+        double d2b = vb - r * (s * i_d + c * i_q);
+        double d2w = (kt * (pd * i_q - pq * i_d) - bw * w2 - tl2) * ij;
+        double w3 = w + h2 * d2w;
+        e = p * (th + h2 * w2);
+        c = cos(e);
+        s = sin(e);
+        xa = pa + h2 * d2a;
+        xb = pb + h2 * d2b;
+        pd = c * xa + s * xb;
+        pq = c * xb - s * xa;
+        i_d = (pd - psim) * ild;
+        i_q = pq * ilq;
+        double d3a = va - r * (c * i_d - s * i_q);
+        double d3b = vb - r * (s * i_d + c * i_q);
+        double d3w = (kt * (pd * i_q - pq * i_d) - bw * w3 - tl2) * ij;
+        double w4 = w + h * d3w;
+        e = p * (th + h * w3);
+        c = cos(e);
+        s = sin(e);
+        xa = pa + h * d3a;
+        xb = pb + h * d3b;
+        pd = c * xa + s * xb;
+        pq = c * xb - s * xa;
+        i_d = (pd - psim) * ild;
+        i_q = pq * ilq;
+        double d4a = va - r * (c * i_d - s * i_q);
+        double d4b = vb - r * (s * i_d + c * i_q);
+        double d4w = (kt * (pd * i_q - pq * i_d) - bw * w4 - tl4) * ij;
+        pa += h6 * (d1a + 2.0 * (d2a + d3a) + d4a);
+        pb += h6 * (d1b + 2.0 * (d2b + d3b) + d4b);
+        th += h6 * (w + 2.0 * (w2 + w3) + w4);
+        w += h6 * (d1w + 2.0 * (d2w + d3w) + d4w);
+        t += h;
+    }
+    st[0] = pa;
+    st[1] = pb;
+    st[2] = w;
+    st[3] = th;
+}
+
+/* MotorModel.advance_pieces; st = (pa, pb, w, th) in and out, returns int g . i dt. */
+static double advance_pieces(const cfg_t *m, int spm, double *st, const piece_t *pieces,
+                             int npieces, double h_max, double tl0, double tl_slope, double bw)
+{
+    double p = m->p, r = m->r, psim = m->psim, ild = m->ild, ij = m->ij, kt = m->kt;
+    double pa = st[0], pb = st[1], w = st[2], th = st[3];
+    double t = 0.0, q = 0.0;
+    double ril = r * ild;
+    double rk = r * psim * ild;
+    double kti = kt * psim * ild;
+    for (int k = 0; k < npieces; k++) {
+        double length = pieces[k].len, va = pieces[k].va, vb = pieces[k].vb;
+        long n = 1;
+        if (!(length <= h_max)) {
+            double cn = ceil(length / h_max - 1e-9);
+            n = cn < 1.0 ? 1 : (long)cn;
+        }
+        double pa0 = pa, pb0 = pb;
+        if (!spm) {
+            double s4[4] = {pa, pb, w, th};
+            advance_general(m, s4, va, vb, length / (double)n, n, tl0 + tl_slope * t, tl_slope,
+                            bw);
+            pa = s4[0];
+            pb = s4[1];
+            w = s4[2];
+            th = s4[3];
+        } else {
+            double h = length / (double)n;
+            double h2 = 0.5 * h;
+            double h6 = h / 6.0;
+            for (long i = 0; i < n; i++) {
+                double tl1 = tl0 + tl_slope * (t + (double)i * h);
+                double tl2 = tl1 + tl_slope * h2;
+                double tl4 = tl1 + tl_slope * h;
+                double e = p * th;
+                double c = cos(e);
+                double s = sin(e);
+                double d1a = va - ril * pa + rk * c;
+                double d1b = vb - ril * pb + rk * s;
+                double d1w = (kti * (c * pb - s * pa) - bw * w - tl1) * ij;
+                double xa = pa + h2 * d1a;
+                double xb = pb + h2 * d1b;
+                double w2 = w + h2 * d1w;
+                e = p * (th + h2 * w);
+                c = cos(e);
+                s = sin(e);
+                double d2a = va - ril * xa + rk * c;
+                double d2b = vb - ril * xb + rk * s;
+                double d2w = (kti * (c * xb - s * xa) - bw * w2 - tl2) * ij;
+                xa = pa + h2 * d2a;
+                xb = pb + h2 * d2b;
+                double w3 = w + h2 * d2w;
+                e = p * (th + h2 * w2);
+                c = cos(e);
+                s = sin(e);
+                double d3a = va - ril * xa + rk * c;
+                double d3b = vb - ril * xb + rk * s;
+                double d3w = (kti * (c * xb - s * xa) - bw * w3 - tl2) * ij;
+                xa = pa + h * d3a;
+                xb = pb + h * d3b;
+                double w4 = w + h * d3w;
+                e = p * (th + h * w3);
+                c = cos(e);
+                s = sin(e);
+                double d4a = va - ril * xa + rk * c;
+                double d4b = vb - ril * xb + rk * s;
+                double d4w = (kti * (c * xb - s * xa) - bw * w4 - tl4) * ij;
+                pa += h6 * (d1a + 2.0 * (d2a + d3a) + d4a);
+                pb += h6 * (d1b + 2.0 * (d2b + d3b) + d4b);
+                th += h6 * (w + 2.0 * (w2 + w3) + w4);
+                w += h6 * (d1w + 2.0 * (d2w + d3w) + d4w);
+            }
+        }
+        double ga = pieces[k].ga, gb = pieces[k].gb;
+        if (ga != 0.0 || gb != 0.0) {
+            q += ga * (va * length - pa + pa0) + gb * (vb * length - pb + pb0);
+        }
+        t += length;
+    }
+    st[0] = pa;
+    st[1] = pb;
+    st[2] = w;
+    st[3] = th;
+    return q / r;
+}
+
+static void currents(const cfg_t *m, double pa, double pb, double th, double *ia, double *ib)
+{
+    double e = m->p * th;
+    double c = cos(e), s = sin(e);
+    double i_d = (c * pa + s * pb - m->psim) * m->ild;
+    double i_q = (c * pb - s * pa) * m->ilq;
+    *ia = c * i_d - s * i_q;
+    *ib = s * i_d + c * i_q;
+}
+
+/* ------------------------------------------------------------------ argument helpers */
+
+static int get_doubles(PyObject *seq, double *out, Py_ssize_t n, const char *what)
+{
+    if (!PyTuple_Check(seq) && !PyList_Check(seq)) {
+        PyErr_Format(PyExc_TypeError, "%s must be a tuple or list", what);
+        return -1;
+    }
+    if (PySequence_Fast_GET_SIZE(seq) != n) {
+        PyErr_Format(PyExc_ValueError, "%s must have %zd items", what, n);
+        return -1;
+    }
+    PyObject **items = PySequence_Fast_ITEMS(seq);
+    for (Py_ssize_t i = 0; i < n; i++) {
+        double v = PyFloat_AsDouble(items[i]);
+        if (v == -1.0 && PyErr_Occurred()) {
+            return -1;
+        }
+        out[i] = v;
+    }
+    return 0;
+}
+
+static int get_double(PyObject *o, double *out)
+{
+    double v = PyFloat_AsDouble(o);
+    if (v == -1.0 && PyErr_Occurred()) {
+        return -1;
+    }
+    *out = v;
+    return 0;
+}
+
+/* cfg: (dc_mode, src_v, rs, ic, unidirectional, ud, knee, locked, kw, tl_t, tl_v0, tl_slope,
+ *       open_phase); motor: MotorModel._k = (p, r, psim, ild, ilq, ij, b, kt). */
+#define NCFG 13
+static int get_cfg(PyObject *motor, PyObject *cfg, cfg_t *c)
+{
+    double k[8], f[NCFG];
+    if (get_doubles(motor, k, 8, "motor constants") < 0 || get_doubles(cfg, f, NCFG, "cfg") < 0) {
+        return -1;
+    }
+    c->p = k[0];
+    c->r = k[1];
+    c->psim = k[2];
+    c->ild = k[3];
+    c->ilq = k[4];
+    c->ij = k[5];
+    c->b = k[6];
+    c->kt = k[7];
+    c->dc_mode = (int)f[0];
+    c->src_v = f[1];
+    c->rs = f[2];
+    c->ic = f[3];
+    c->unidir = f[4] != 0.0;
+    c->ud = f[5];
+    c->knee = f[6];
+    c->locked = f[7] != 0.0;
+    c->kw = f[8];
+    c->tl_t = f[9];
+    c->tl_v0 = f[10];
+    c->tl_slope = f[11];
+    c->open_phase = (int)f[12];
+    if (c->dc_mode < 0 || c->dc_mode > 2 || c->open_phase < -1 || c->open_phase > 2) {
+        PyErr_SetString(PyExc_ValueError, "cfg: dc_mode or open_phase out of range");
+        return -1;
+    }
+    return 0;
+}
+
+static int get_kinds(PyObject *seq, int *kinds)
+{
+    double k[3];
+    if (get_doubles(seq, k, 3, "kinds") < 0) {
+        return -1;
+    }
+    for (int x = 0; x < 3; x++) {
+        if (!(k[x] >= 0.0 && k[x] <= 4.0)) {
+            PyErr_SetString(PyExc_ValueError, "kinds: a leg state must be 0..4");
+            return -1;
+        }
+        kinds[x] = (int)k[x];
+    }
+    return 0;
+}
+
+/* ------------------------------------------------------------------ Python functions */
+
+PyDoc_STRVAR(integrate_doc,
+"integrate(motor_k, cfg, kinds, t0, t1, y, h_max, acc) -> (y, kinds, events, overflows, vdc)\n\n"
+"Network.integrate over [t0, t1] from y (5 floats) with the phase states kinds (3 ints,\n"
+"already configured); adds int u_alpha, u_beta, i_dc dt to the list acc (3 floats).\n"
+"Returns the end state (a new list), the phase states at the end, the events and event-budget\n"
+"overflows counted, and v_dc at the last evaluation.");
+
+static PyObject *mod_integrate(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    (void)self;
+    if (nargs != 8) {
+        PyErr_SetString(PyExc_TypeError, "integrate takes 8 arguments");
+        return NULL;
+    }
+    net_t n;
+    memset(&n, 0, sizeof n);
+    double t0, t1, h_max, y[5], acc[3];
+    int kinds[3];
+    if (get_cfg(args[0], args[1], &n.c) < 0 || get_kinds(args[2], kinds) < 0 ||
+        get_double(args[3], &t0) < 0 || get_double(args[4], &t1) < 0 ||
+        get_doubles(args[5], y, 5, "y") < 0 || get_double(args[6], &h_max) < 0) {
+        return NULL;
+    }
+    PyObject *acc_list = args[7];
+    if (!PyList_Check(acc_list) || get_doubles(acc_list, acc, 3, "acc") < 0) {
+        if (!PyErr_Occurred()) {
+            PyErr_SetString(PyExc_TypeError, "acc must be a list of 3 floats");
+        }
+        return NULL;
+    }
+    if (!(h_max > 0.0) || !isfinite(t0) || !isfinite(t1) || !(t1 >= t0)) {
+        PyErr_SetString(PyExc_ValueError, "integrate: need t0 <= t1 finite and h_max > 0");
+        return NULL;
+    }
+    configure(&n, kinds);
+    net_integrate(&n, t0, t1, y, h_max, acc);
+    for (int i = 0; i < 3; i++) {
+        PyObject *f = PyFloat_FromDouble(acc[i]);
+        if (f == NULL) {
+            return NULL;
+        }
+        PyList_SetItem(acc_list, i, f); /* steals f */
+    }
+    return Py_BuildValue("[ddddd](iii)lld", y[0], y[1], y[2], y[3], y[4], n.kinds[0], n.kinds[1],
+                         n.kinds[2], n.events, n.overflows, n.vdc);
+}
+
+PyDoc_STRVAR(settle_doc,
+"settle(motor_k, cfg, kinds, t, y) -> (y, kinds, events)\n\n"
+"Network.begin's projection and _settle: puts y on the constraint of the floating phases and\n"
+"applies every turn-on condition that holds at t.");
+
+static PyObject *mod_settle(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    (void)self;
+    if (nargs != 5) {
+        PyErr_SetString(PyExc_TypeError, "settle takes 5 arguments");
+        return NULL;
+    }
+    net_t n;
+    memset(&n, 0, sizeof n);
+    double t, y[5];
+    int kinds[3];
+    if (get_cfg(args[0], args[1], &n.c) < 0 || get_kinds(args[2], kinds) < 0 ||
+        get_double(args[3], &t) < 0 || get_doubles(args[4], y, 5, "y") < 0) {
+        return NULL;
+    }
+    configure(&n, kinds);
+    if (n.nzero) {
+        project(&n, y);
+        settle(&n, t, y);
+    }
+    return Py_BuildValue("[ddddd](iii)l", y[0], y[1], y[2], y[3], y[4], n.kinds[0], n.kinds[1],
+                         n.kinds[2], n.events);
+}
+
+/* Plant._leg_period's numerics from the windows on. Returns 0 (the period is not one the
+ * constant-vector form may take: the caller uses the general network), 1 (done: st, out),
+ * -1 (more edges than this code holds: the caller uses the Python version). */
+static int leg_period(const cfg_t *m, double lind, int spm, double T, double wins[6][MAX_WIN][2],
+                      const int nwin[6], double ud, double knee, double vdc, double *st,
+                      double h_max, double v0, double slope, double bw, double *out, int *h_end)
+{
+    int need[3], nneed = 0;
+    double signs[3] = {0.0, 0.0, 0.0};
+    double cur0[3] = {0.0, 0.0, 0.0};
+    int have_cur0 = 0;
+    int h0 = 0;
+    double tog_t[MAX_TOG];
+    int tog_b[MAX_TOG];
+    int ntog = 0;
+    for (int x = 0; x < 3; x++) {
+        double (*hi)[2] = wins[2 * x];
+        double (*lo)[2] = wins[2 * x + 1];
+        int nhi = nwin[2 * x], nlo = nwin[2 * x + 1];
+        double high[MAX_WIN + 1][2];
+        double on = 0.0;
+        for (int i = 0; i < nhi; i++) {
+            double a = hi[i][0], b = hi[i][1];
+            on += b - a;
+            for (int k = 0; k < nlo; k++) {
+                if (a < lo[k][1] && lo[k][0] < b) {
+                    return 0;
+                }
+            }
+        }
+        for (int k = 0; k < nlo; k++) {
+            on += lo[k][1] - lo[k][0];
+        }
+        if (ud > 0.0 || on < T * (1.0 - 1e-12)) {
+            if (!spm) {
+                return 0;
+            }
+            if (!have_cur0) {
+                double ia, ib;
+                currents(m, st[0], st[1], st[3], &ia, &ib);
+                cur0[0] = ia;
+                cur0[1] = -0.5 * ia + S32 * ib;
+                cur0[2] = -0.5 * ia - S32 * ib;
+                have_cur0 = 1;
+            }
+            double ix = cur0[x];
+            double thr = ud > 0.0 ? knee : 0.0;
+            if (fabs(ix) <= thr + ZERO_CURRENT_A) {
+                return 0;
+            }
+            signs[x] = ix > 0.0 ? 1.0 : -1.0;
+            need[nneed++] = x;
+            if (ix < 0.0) {
+                int nh = 0;
+                double t = 0.0;
+                for (int k = 0; k < nlo; k++) {
+                    if (lo[k][0] > t) {
+                        high[nh][0] = t;
+                        high[nh][1] = lo[k][0];
+                        nh++;
+                    }
+                    t = lo[k][1];
+                }
+                if (t < T) {
+                    high[nh][0] = t;
+                    high[nh][1] = T;
+                    nh++;
+                }
+                hi = high;
+                nhi = nh;
+            }
+        }
+        int bit = 1 << x;
+        for (int i = 0; i < nhi; i++) {
+            double a = hi[i][0], b = hi[i][1];
+            if (ntog + 2 > MAX_TOG) {
+                return -1;
+            }
+            if (a <= 0.0) {
+                h0 |= bit;
+            } else {
+                tog_t[ntog] = a;
+                tog_b[ntog++] = bit;
+            }
+            if (b < T) {
+                tog_t[ntog] = b;
+                tog_b[ntog++] = bit;
+            }
+        }
+    }
+    /* sort (time, bit) as Python sorts the tuples */
+    for (int i = 1; i < ntog; i++) {
+        double tt = tog_t[i];
+        int bb = tog_b[i];
+        int j = i - 1;
+        while (j >= 0 && (tog_t[j] > tt || (tog_t[j] == tt && tog_b[j] > bb))) {
+            tog_t[j + 1] = tog_t[j];
+            tog_b[j + 1] = tog_b[j];
+            j--;
+        }
+        tog_t[j + 1] = tt;
+        tog_b[j + 1] = bb;
+    }
+    double off_a = -ud * (2.0 * signs[0] - signs[1] - signs[2]) / 3.0;
+    double off_b = -ud * (signs[1] - signs[2]) / SQRT3;
+    piece_t pieces[MAX_TOG + 1];
+    double edges[MAX_TOG + 2];
+    int np = 0, ne = 0;
+    edges[ne++] = 0.0;
+    double t = 0.0;
+    int h = h0;
+    double ua_int = 0.0, ub_int = 0.0;
+    for (int i = 0; i <= ntog; i++) {
+        double when = i < ntog ? tog_t[i] : T;
+        if (i == ntog && !(t < T)) {
+            break;
+        }
+        if (when > t || i == ntog) {
+            /* _LEG_UNITS[h] */
+            double ua = ((double)(2 * (h & 1)) - (double)(h >> 1 & 1) - (double)(h >> 2 & 1)) / 3.0;
+            double ub = ((double)(h >> 1 & 1) - (double)(h >> 2 & 1)) / SQRT3;
+            double ga = 0.0, gb = 0.0;
+            for (int x = 0; x < 3; x++) {
+                if (h >> x & 1) {
+                    ga += AX[x][0];
+                    gb += AX[x][1];
+                }
+            }
+            double va = ua * vdc + off_a;
+            double vb = ub * vdc + off_b;
+            pieces[np].len = when - t;
+            pieces[np].va = va;
+            pieces[np].vb = vb;
+            pieces[np].ga = ga;
+            pieces[np].gb = gb;
+            np++;
+            ua_int += va * (when - t);
+            ub_int += vb * (when - t);
+            edges[ne++] = when;
+            t = when;
+        }
+        if (i < ntog) {
+            h ^= tog_b[i];
+        }
+    }
+    double y0[4] = {st[0], st[1], st[2], st[3]};
+    double q = advance_pieces(m, spm, st, pieces, np, h_max, v0, slope, bw);
+    if (nneed) {
+        /* Plant._signs_hold */
+        double ia, ib;
+        currents(m, st[0], st[1], st[3], &ia, &ib);
+        double cur1[3] = {ia, -0.5 * ia + S32 * ib, -0.5 * ia - S32 * ib};
+        double u_max = 2.0 / 3.0 * (vdc + 2.0 * ud);
+        double w_max = fabs(y0[2]) > fabs(st[2]) ? fabs(y0[2]) : fabs(st[2]);
+        double ia0, ib0;
+        currents(m, y0[0], y0[1], y0[3], &ia0, &ib0);
+        double i0 = hypot(ia0, ib0), i1 = hypot(ia, ib);
+        double i_max = i0 > i1 ? i0 : i1;
+        i_max += T * (u_max + m->p * w_max * m->psim) / lind + 1e-3;
+        double load_max = fabs(v0) + fabs(slope) * T;
+        double alpha_e = m->p * (m->kt * m->psim * i_max + bw * w_max + load_max) * m->ij;
+        double we = m->p * w_max + alpha_e * T;
+        double bound = (m->r / lind * (u_max + m->r * i_max + we * m->psim) +
+                        (we * we + alpha_e) * m->psim) * T * T / 8.0;
+        double thr = lind * (ud > 0.0 ? knee : 0.0) + bound;
+        for (int k = 0; k < nneed; k++) {
+            int x = need[k];
+            double ex0 = AX[x][0], ex1 = AX[x][1];
+            double s = signs[x];
+            double vx = 0.0, vx_end = 0.0;
+            for (int i = 0; i < np; i++) {
+                vx_end += (ex0 * pieces[i].va + ex1 * pieces[i].vb) * pieces[i].len;
+            }
+            double yy0 = lind * cur0[x];
+            double dy = lind * cur1[x] - vx_end - yy0;
+            for (int i = 0; i < np; i++) {
+                if (s * (vx + yy0 + dy * edges[i] / T) <= thr) {
+                    memcpy(st, y0, sizeof y0);
+                    return 0;
+                }
+                vx += (ex0 * pieces[i].va + ex1 * pieces[i].vb) * pieces[i].len;
+            }
+            if (s * lind * cur1[x] <= thr) {
+                memcpy(st, y0, sizeof y0);
+                return 0;
+            }
+        }
+    }
+    out[0] = ua_int;
+    out[1] = ub_int;
+    out[2] = q;
+    *h_end = h;
+    return 1;
+}
+
+PyDoc_STRVAR(leg_period_doc,
+"leg_period(motor_k, ld, spm, T, windows, ud, knee, vdc, state, h_max, v0, slope, bw)\n"
+"    -> None | False | (pa, pb, w, th, u_alpha_int, u_beta_int, idc_int, h)\n\n"
+"Plant._leg_period from the switch windows (6 lists of (on, off) pairs) on: False when the\n"
+"period cannot be taken as constant-vector pieces (the general network takes it), None when\n"
+"it has more edges than the C code holds (the Python version takes it), else the end state\n"
+"(state: pa, pb, w, th), the period's integrals and the final leg-high pattern.");
+
+static PyObject *mod_leg_period(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    (void)self;
+    if (nargs != 13) {
+        PyErr_SetString(PyExc_TypeError, "leg_period takes 13 arguments");
+        return NULL;
+    }
+    double k[8];
+    cfg_t m;
+    memset(&m, 0, sizeof m);
+    if (get_doubles(args[0], k, 8, "motor constants") < 0) {
+        return NULL;
+    }
+    m.p = k[0];
+    m.r = k[1];
+    m.psim = k[2];
+    m.ild = k[3];
+    m.ilq = k[4];
+    m.ij = k[5];
+    m.b = k[6];
+    m.kt = k[7];
+    double ld;
+    if (get_double(args[1], &ld) < 0) {
+        return NULL;
+    }
+    int spm = PyObject_IsTrue(args[2]);
+    if (spm < 0) {
+        return NULL;
+    }
+    double T, ud, knee, vdc, st[4], h_max, v0, slope, bw;
+    if (get_double(args[3], &T) < 0 || get_double(args[5], &ud) < 0 ||
+        get_double(args[6], &knee) < 0 || get_double(args[7], &vdc) < 0 ||
+        get_doubles(args[8], st, 4, "state") < 0 || get_double(args[9], &h_max) < 0 ||
+        get_double(args[10], &v0) < 0 || get_double(args[11], &slope) < 0 ||
+        get_double(args[12], &bw) < 0) {
+        return NULL;
+    }
+    PyObject *windows = args[4];
+    if (!PyList_Check(windows) || PyList_GET_SIZE(windows) != 6) {
+        PyErr_SetString(PyExc_TypeError, "windows must be a list of 6 lists");
+        return NULL;
+    }
+    double wins[6][MAX_WIN][2];
+    int nwin[6];
+    for (int j = 0; j < 6; j++) {
+        PyObject *lst = PyList_GET_ITEM(windows, j);
+        if (!PyList_Check(lst)) {
+            PyErr_SetString(PyExc_TypeError, "windows must be a list of 6 lists");
+            return NULL;
+        }
+        Py_ssize_t nw = PyList_GET_SIZE(lst);
+        if (nw > MAX_WIN) {
+            Py_RETURN_NONE;
+        }
+        nwin[j] = (int)nw;
+        for (Py_ssize_t i = 0; i < nw; i++) {
+            if (get_doubles(PyList_GET_ITEM(lst, i), wins[j][i], 2, "a switch window") < 0) {
+                return NULL;
+            }
+        }
+    }
+    double out[3];
+    int h_end = 0;
+    int r = leg_period(&m, ld, spm, T, wins, nwin, ud, knee, vdc, st, h_max, v0, slope, bw, out,
+                       &h_end);
+    if (r < 0) {
+        Py_RETURN_NONE;
+    }
+    if (r == 0) {
+        Py_RETURN_FALSE;
+    }
+    return Py_BuildValue("(ddddddd i)", st[0], st[1], st[2], st[3], out[0], out[1], out[2], h_end);
+}
+
+static PyMethodDef methods[] = {
+    {"integrate", (PyCFunction)(void (*)(void))mod_integrate, METH_FASTCALL, integrate_doc},
+    {"settle", (PyCFunction)(void (*)(void))mod_settle, METH_FASTCALL, settle_doc},
+    {"leg_period", (PyCFunction)(void (*)(void))mod_leg_period, METH_FASTCALL, leg_period_doc},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef module_def = {
+    PyModuleDef_HEAD_INIT,
+    "_plantnet",
+    "The plant's network integration and PWM period in C (plant_rt/ckernel.py).",
+    -1,
+    methods,
+    NULL,
+    NULL,
+    NULL,
+    NULL,
+};
+
+PyMODINIT_FUNC PyInit__plantnet(void);
+
+PyMODINIT_FUNC PyInit__plantnet(void)
+{
+    SQRT3 = sqrt(3.0);
+    S32 = 0.5 * SQRT3;
+    INV_SQRT3 = 1.0 / SQRT3;
+    AX[0][0] = 1.0;
+    AX[0][1] = 0.0;
+    AX[1][0] = -0.5;
+    AX[1][1] = 0.5 * SQRT3;
+    AX[2][0] = -0.5;
+    AX[2][1] = -0.5 * SQRT3;
+    PyObject *mod = PyModule_Create(&module_def);
+    if (mod == NULL) {
+        return NULL;
+    }
+    /* The kernel's interface version: plant_rt/ckernel.py refuses a build of another one. */
+    if (PyModule_AddIntConstant(mod, "ABI", 1) < 0) {
+        Py_DECREF(mod);
+        return NULL;
+    }
+    return mod;
+}

@@ -1,0 +1,189 @@
+"""The plant's C kernel (plant_rt/c/_plantnet.c) against its Python reference, period by period.
+
+Two plants from the same profile and seed take the same commands, one with the slow paths in C
+(Network.integrate and begin's settling, Plant._leg_period), one in Python (plant_rt/circuit.py,
+plant_rt/plant.py, the reference). After every period their truth records must agree to 1e-12
+of each signal's range over the run (the C code mirrors the Python operation by operation, so
+in practice they are bit-identical; the limit leaves room for a libm or compiler difference).
+Scenarios: random PWM duties with dead time and device drop through current zero crossings and
+knee crossings, at rated and twice rated speed; the safe state coasting at twice rated speed
+(diodes conducting into the link, then no current); gate words with a computation delay; an open
+phase; a dynamic and a resistive DC link; a locked rotor; a load table with a step.
+
+One test perturbs a motor constant in the arguments of the C calls only (1e-9 relative): the
+same comparison must then fail, so it is shown that it can. The solve_ivp reference tests
+(tests/test_plant_pwm_reference.py, tests/test_plant_accuracy.py) run whichever path is the
+default, which is C when the kernel is built.
+"""
+from __future__ import annotations
+
+import math
+import os
+import random
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from plant_rt import Plant, TRUTH_FIELDS, ckernel, load_profile
+
+RATED_RAD_S = 3000.0 * 2.0 * math.pi / 60.0
+ROOT = Path(__file__).resolve().parents[1]
+LIMIT = 1e-12
+DROP = {"dead_time_s": 2.0e-6, "device_drop_v": 1.5}
+WORDS = (0x29, 0x25, 0x26, 0x16, 0x1A, 0x19, 0x2A, 0x15, 0x28, 0x09, 0x00)
+
+needs_kernel = pytest.mark.skipif(ckernel.EXTENSION is None,
+                                  reason=f"C kernel not built: {ckernel.UNAVAILABLE_REASON}")
+
+
+class Counting:
+    """The extension with its calls counted (and optionally its motor constants changed)."""
+
+    def __init__(self, scale_r: float = 1.0):
+        self.calls = {"integrate": 0, "settle": 0, "leg_period": 0}
+        self.scale_r = scale_r
+
+    def _k(self, k):
+        if self.scale_r == 1.0:
+            return k
+        return (k[0], k[1] * self.scale_r) + tuple(k[2:])
+
+    def integrate(self, k, *args):
+        self.calls["integrate"] += 1
+        return ckernel.EXTENSION.integrate(self._k(k), *args)
+
+    def settle(self, k, *args):
+        self.calls["settle"] += 1
+        return ckernel.EXTENSION.settle(self._k(k), *args)
+
+    def leg_period(self, k, *args):
+        self.calls["leg_period"] += 1
+        return ckernel.EXTENSION.leg_period(self._k(k), *args)
+
+
+def make(kernel, overrides: dict, setup=None) -> Plant:
+    overrides = {**overrides}
+    overrides.setdefault("initial", {"speed_rad_s": RATED_RAD_S})
+    plant = Plant(load_profile(overrides=overrides), seed=0)
+    plant.use_c_kernel(kernel)
+    if setup is not None:
+        setup(plant)
+    return plant
+
+
+def compare(overrides: dict, n: int, seed: int, mode: str = "duty", setup=None,
+            kernel=None) -> tuple[float, Counting, Plant]:
+    """Worst |C - Python| over the run, per signal relative to its range (max |value|, >= 1e-9)."""
+    kernel = kernel or Counting()
+    c_plant = make(kernel, overrides, setup)
+    py_plant = make(False, overrides, setup)
+    rng = random.Random(seed)
+    diff = [0.0] * len(TRUTH_FIELDS)
+    scale = [1e-9] * len(TRUTH_FIELDS)
+    for _ in range(n):
+        if mode == "duty":
+            d = (rng.random(), rng.random(), rng.random())
+            c_plant.step(duty=d)
+            py_plant.step(duty=d)
+        elif mode == "gates":
+            g = rng.choice(WORDS)
+            c_plant.step(gates=g)
+            py_plant.step(gates=g)
+        else:
+            c_plant.step()
+            py_plant.step()
+        a, b = c_plant.truth(), py_plant.truth()
+        for i, (x, y) in enumerate(zip(a, b)):
+            diff[i] = max(diff[i], abs(x - y))
+            scale[i] = max(scale[i], abs(y))
+    assert c_plant.network.events == py_plant.network.events
+    return max(d / s for d, s in zip(diff, scale)), kernel, py_plant
+
+
+@needs_kernel
+def test_default_is_the_c_kernel_unless_pure_python_is_asked():
+    plant = Plant(load_profile(), seed=0)
+    assert plant.c_kernel == (not ckernel.PURE_PYTHON)
+    env = {**os.environ, "HIL_PLANT_PURE_PYTHON": "1"}
+    out = subprocess.run(
+        [sys.executable, "-c", "from plant_rt import Plant, load_profile, ckernel; "
+         "print(Plant(load_profile()).c_kernel, ckernel.AVAILABLE)"],
+        cwd=ROOT, env=env, capture_output=True, text=True, check=True).stdout.split()
+    assert out == ["False", "True"]
+
+
+@needs_kernel
+@pytest.mark.parametrize("speed", [RATED_RAD_S, 2.0 * RATED_RAD_S])
+def test_pwm_with_dead_time_and_drop_c_equals_python(speed):
+    worst, kernel, ref = compare({"inverter": DROP, "initial": {"speed_rad_s": speed}}, 1500,
+                                 seed=1)
+    assert worst <= LIMIT
+    assert kernel.calls["leg_period"] > 0 and kernel.calls["integrate"] > 0
+    assert ref.network.events > 20          # diode zero crossings and knee crossings were met
+
+
+@needs_kernel
+def test_pwm_with_dead_time_through_zero_crossings_from_standstill():
+    worst, kernel, ref = compare({"inverter": {"dead_time_s": 1.0e-6},
+                                  "initial": {"speed_rad_s": 0.0}}, 1500, seed=2)
+    assert worst <= LIMIT
+    assert kernel.calls["integrate"] > 0 and ref.network.events > 0
+
+
+@needs_kernel
+def test_safe_state_coast_at_twice_rated_speed_c_equals_python():
+    worst, kernel, ref = compare({"inverter": DROP, "initial": {"speed_rad_s": 2 * RATED_RAD_S}},
+                                 2000, seed=3, mode="none", setup=lambda p: p.safe_state())
+    assert worst <= LIMIT
+    assert ref.network.events > 10 and kernel.calls["integrate"] > 0
+
+
+@pytest.mark.parametrize("name, overrides, mode, setup", [
+    ("hardware timing, gate words", {"timing": {"computation_delay_s": 50e-6}, "inverter": DROP},
+     "gates", None),
+    ("open phase", {"inverter": DROP}, "gates", lambda p: p.set_open_phase("b")),
+    ("dynamic link", {"dc_link": {"source_resistance_ohm": 0.5, "capacitance_f": 1e-3,
+                                  "unidirectional": True}}, "gates", None),
+    ("resistive link", {"dc_link": {"source_resistance_ohm": 0.5}}, "duty", None),
+    ("locked rotor", {"load": {"locked": True}, "inverter": DROP}, "duty", None),
+    ("load table with a step", {"load": {"table": [[0.0, 0.0], [0.02, 1.0], [0.02, -0.5],
+                                                   [0.04, 0.3]],
+                                         "speed_proportional_nm_per_rad_s": 1e-3},
+                                "inverter": DROP}, "duty", None),
+    ("interior magnet", {"motor": {"inductance_q_h": 9e-3}, "inverter": {"dead_time_s": 2e-6}},
+     "gates", None),
+])
+@needs_kernel
+def test_other_network_paths_c_equal_python(name, overrides, mode, setup):
+    worst, kernel, _ = compare(overrides, 1000, seed=4, mode=mode, setup=setup)
+    assert worst <= LIMIT, name
+    assert kernel.calls["integrate"] > 0, name
+
+
+@needs_kernel
+def test_the_comparison_fails_when_the_c_side_gets_a_perturbed_resistance():
+    worst, kernel, _ = compare({"inverter": DROP}, 400, seed=5, kernel=Counting(scale_r=1 + 1e-9))
+    assert kernel.calls["leg_period"] > 0
+    assert worst > 100 * LIMIT
+
+
+@needs_kernel
+def test_the_kernel_refuses_malformed_arguments():
+    ext = ckernel.EXTENSION
+    plant = Plant(load_profile(), seed=0)
+    net = plant.network
+    k, cfg = plant.motor._k, net._cfg()
+    y = [0.09, 0.0, 10.0, 0.0, 70.0]
+    with pytest.raises(ValueError):
+        ext.integrate(k[:7], cfg, [0, 1, 1], 0.0, 5e-5, y, 5e-5, [0.0, 0.0, 0.0])
+    with pytest.raises(ValueError):
+        ext.integrate(k, cfg, [0, 1, 7], 0.0, 5e-5, y, 5e-5, [0.0, 0.0, 0.0])
+    with pytest.raises(ValueError):
+        ext.integrate(k, cfg, [0, 1, 1], 0.0, 5e-5, y, 0.0, [0.0, 0.0, 0.0])
+    with pytest.raises(TypeError):
+        ext.integrate(k, cfg, [0, 1, 1], 0.0, 5e-5, y, 5e-5, (0.0, 0.0, 0.0))
+    with pytest.raises(TypeError):
+        ext.leg_period(k, 4.8e-3, True, 5e-5, [[]] * 5, 0.0, 0.1, 70.0, y[:4], 5e-5, 0.0,
+                       0.0, 0.0)
