@@ -228,6 +228,35 @@ class FirmwareLibraryLink(_FirmwareLibrary):
         self.tx_frames += frames_out
         self.rx_bytes += bytes_in
 
+    def sample_exchange(self, exchange_sample, encoder, decoder, cap_out: bytearray,
+                        cap_in: bytearray, frames: dict[str, int], inbox, take_earlier):
+        """A function (k, adc_i1, adc_i2, adc_vdc, encoder, status) for a link tap that drives
+        this firmware from C (protocol.ccodec's `exchange_sample`): bytes the firmware answered
+        earlier go to `take_earlier` first, then one C call sends SAMPLE(k), appends both
+        directions' frames to the captures, counts them here and in `frames`, and queues the
+        answers in `inbox`. The per-period path of every in-process lockstep run, so it holds
+        the function's address and the link's buffers instead of asking each period."""
+        fn, fw = self.exchange_target()
+        raw = self._raw
+
+        def exchange(k, adc_i1, adc_i2, adc_vdc, encoder_count, status):
+            if self._closed:
+                raise LinkError(f"{self.url}: link is closed")
+            if raw:                       # answers to earlier frames come first
+                earlier = bytes(raw)
+                raw.clear()
+                take_earlier(earlier)
+            n_out, n_in = len(cap_out), len(cap_in)
+            msgs, frames_in = exchange_sample(fn, fw, encoder, decoder, cap_out, cap_in, k,
+                                              adc_i1, adc_i2, adc_vdc, encoder_count, status)
+            frames["out"] += 1
+            frames["in"] += frames_in
+            self.tx_bytes += len(cap_out) - n_out
+            self.tx_frames += 1
+            self.rx_bytes += len(cap_in) - n_in
+            inbox.extend(msgs)
+        return exchange
+
 
 class FirmwareLibraryCanLink(_FirmwareLibrary):
     """The CAN transport (hil_fw_can_exchange): frames, not bytes; not tapped."""

@@ -449,6 +449,14 @@ class BenchSession:
         publish_every = self.publish_every
         tap = self.tap
         clock = time.monotonic
+        record_telemetry = recorder.telemetry
+        # what the link tap has already decoded is taken without a call (its recv() would
+        # pop the same queue first); an untapped link has no such queue
+        inbox = tap.inbox if tap is not None else ()
+        # What dispatch() does with a TELEMETRY, less the hop; a board still in HELLO takes
+        # dispatch()'s path (it notes what the board sent before its HELLO).
+        if self.board_hello is None:
+            record_telemetry = dispatch
         # A firmware library in this process with the C codec: SAMPLE out and the answers in
         # through one C call while no link fault is active (hil/session/link_tap.py).
         fast = tap.sample_exchanger() if tap is not None else None
@@ -464,6 +472,7 @@ class BenchSession:
             recorder.period(k, plant.truth(), sample)
             gates = duty = None
             others = None
+            saw_telemetry = False
             msg_out = None
             first_sent = None
             try:
@@ -483,7 +492,7 @@ class BenchSession:
                     if first_sent is None:
                         first_sent = deadline - answer_timeout
                     wait = answer_timeout
-                    msg = link.recv(wait)
+                    msg = inbox.popleft() if inbox else link.recv(wait)
                     while msg is not None:
                         t = type(msg)
                         if t is Gates:
@@ -499,6 +508,11 @@ class BenchSession:
                                 break
                             self.stale_answers += 1
                             self._last_stale = ("DUTY", msg.period)
+                        elif t is Telemetry:
+                            # every period's companion: straight to the recorder; named among
+                            # "others" only if the period goes unanswered
+                            record_telemetry(msg)
+                            saw_telemetry = True
                         else:
                             dispatch(msg)
                             if others is None:
@@ -514,13 +528,15 @@ class BenchSession:
                                     clock() > deadline + answer_timeout:
                                 break             # a flood: this wait is lost
                         else:
-                            msg = link.recv(wait)
+                            msg = inbox.popleft() if inbox else link.recv(wait)
                     if gates is not None or duty is not None:
                         break
             except (OSError, ValueError) as exc:  # LinkError is an OSError: the line is gone
                 self._link_failed(k, exc)
             if gates is None and duty is None:
                 self.missed_answers += 1
+                if saw_telemetry:
+                    others = (others or set()) | {"TELEMETRY"}
                 if others:
                     self._streak_others |= others
                 if watchdog.consecutive == 0:

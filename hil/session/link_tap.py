@@ -74,7 +74,9 @@ class LinkTap:
         codec = codec_impl()
         self._encoder = codec.FrameEncoder()
         self._decoder = codec.StreamDecoder()
-        self._inbox: deque = deque()
+        # decoded messages not taken yet; the session's period loop pops it directly
+        self.inbox: deque = deque()
+        self._inbox = self.inbox
         self._partial = bytearray()
         self._rng = {d: random.Random(f"{seed}:{d}") for d in DIRECTIONS}
         self._held: list[tuple[int, str, bytes]] = []
@@ -211,33 +213,14 @@ class LinkTap:
         while no link fault is active and nothing is queued: the caller checks `fast_ready`."""
         from protocol import ccodec
 
-        target = getattr(self.link, "exchange_target", None)
-        if (target is None or not ccodec.AVAILABLE
+        make = getattr(self.link, "sample_exchange", None)
+        if (make is None or not ccodec.AVAILABLE
                 or not isinstance(self._encoder, ccodec.FrameEncoder)
-                or not isinstance(self._decoder, ccodec.StreamDecoder)):
+                or not isinstance(self._decoder, ccodec.StreamDecoder)
+                or self.link.exchange_target() is None):
             return None
-        exchange_sample = ccodec.exchange_sample
-        encoder, decoder, inbox = self._encoder, self._decoder, self._inbox
-        cap_out, cap_in = self.captured["out"], self.captured["in"]
-        frames = self.captured_frames
-        link = self.link
-
-        def exchange(k, adc_i1, adc_i2, adc_vdc, encoder_count, status):
-            target = link.exchange_target()
-            if target is None:
-                raise OSError(f"{link.url}: link is closed")
-            earlier = link.read_bytes(0.0)      # answers to earlier frames come first
-            if earlier:
-                self._take_in(earlier)
-            fn, fw = target
-            n_out, n_in = len(cap_out), len(cap_in)
-            msgs, frames_in = exchange_sample(fn, fw, encoder, decoder, cap_out, cap_in, k,
-                                              adc_i1, adc_i2, adc_vdc, encoder_count, status)
-            frames["out"] += 1
-            frames["in"] += frames_in
-            link.count_exchange(len(cap_out) - n_out, 1, len(cap_in) - n_in)
-            inbox.extend(msgs)
-        return exchange
+        return make(ccodec.exchange_sample, self._encoder, self._decoder, self.captured["out"],
+                    self.captured["in"], self.captured_frames, self._inbox, self._take_in)
 
     @property
     def fast_ready(self) -> bool:
