@@ -101,6 +101,7 @@ class ParamId(IntEnum):
     DEVICE_DROP_COMP_V = 64  # DTC: device drop compensated in the observer voltage, 0 = off
     DELAY_COMP_PERIODS = 65  # DTC: 1 = answers act one period late (integrate what acted, predict)
     CURRENT_ZERO_CAL_PERIODS = 66  # at each enable, periods with the bridge off to measure the current ADCs' zero, 0 = off
+    RS_ID_PERIODS = 67  # start-up stator-resistance identification at standstill, periods per current level, 0 = off
 
 
 # HELLO capability bits

@@ -153,9 +153,11 @@ def test_plan02_hardware_limits_fail_when_the_boards_resistance_is_colder_still(
     """Plan 02's flux limits on paper-hardware (93.0 .. 97.0 mWb, derived from the board's
     resistance error dR = 0.0909 ohm: bench/hardware_limits.py predicts 95.0 mWb) fail when
     the board's R is broken to 0.35 ohm (dR = 0.208 ohm, more than twice the error: the d-axis
-    flux error x = dR i_q / w_e grows from 2.1 to 4.9 mWb and the true flux falls under 93)."""
+    flux error x = dR i_q / w_e grows from 2.1 to 4.9 mWb and the true flux falls under 93).
+    The board must also not measure its R at start-up (paper-hardware turns RS_ID_PERIODS on,
+    which would replace the broken 0.35 with the identified value and pass)."""
     plan = _variant(tmp_path, "02_steady_state_3000rpm.yaml",
-                    param_set={"stator_resistance_ohm": 0.35})
+                    param_set={"stator_resistance_ohm": 0.35, "rs_id_periods": 0})
     result, _ = run_plan(plan, profile="paper-hardware", reports=False)
     _assert_fails_on(result, "flux magnitude at its reference")
 

@@ -54,6 +54,7 @@ void ctl_params_default(ctl_params *p)
     p->device_drop_comp_v = CTL_DEFAULT_DEVICE_DROP_COMP_V;
     p->delay_comp_periods = CTL_DEFAULT_DELAY_COMP_PERIODS;
     p->current_zero_cal_periods = CTL_DEFAULT_CURRENT_ZERO_CAL_PERIODS;
+    p->rs_id_periods = CTL_DEFAULT_RS_ID_PERIODS;
 }
 
 void ctl_derive(ctl *c)
@@ -130,6 +131,14 @@ void ctl_derive(ctl *c)
     k->inv_comp_on = (p->dead_time_comp_s > 0.0f || p->device_drop_comp_v > 0.0f) ? 1u : 0u;
     k->delay_comp = p->delay_comp_periods;
     k->zero_cal_periods = p->current_zero_cal_periods;
+    k->rs_id.periods_per_level = p->rs_id_periods;
+    k->rs_id.off_periods = (uint32_t)(CTL_DESIGN_RS_ID_OFF_S / t + 0.999f);
+    k->rs_id.current_low_a = CTL_DESIGN_RS_ID_CURRENT_LOW_A;
+    k->rs_id.current_high_a = CTL_DESIGN_RS_ID_CURRENT_HIGH_A;
+    k->rs_id.stator_inductance_h = p->stator_inductance_h;
+    k->rs_id.bandwidth_hz = CTL_DESIGN_RS_ID_BANDWIDTH_HZ;
+    k->rs_id.control_period_s = t;
+    rsid_derive(&k->rs_id);
     k->dtc_comp = (uint8_t)(k->inv_comp_on | k->delay_comp);
     k->foc_angle_source = p->foc_angle_source;
 
@@ -195,6 +204,15 @@ int ctl_set_command(ctl *c, const hil_command *cmd)
         st->zero_cal_left = c->cfg.zero_cal_periods;
         st->zero_cal_sum1 = 0.0f;
         st->zero_cal_sum2 = 0.0f;
+        /* then, once, the stator resistance (rs_id.h): only with the rotor at standstill */
+        if (c->cfg.rs_id.periods_per_level > 0u && st->rs_id.phase < RSID_DONE) {
+            if (fabsf(st->enc.speed_rad_s) < CTL_DESIGN_RS_ID_MAX_SPEED_RAD_S) {
+                rsid_start(&st->rs_id);
+            } else {
+                st->rs_id.phase = RSID_IDLE;
+            }
+        }
+        st->startup = (uint8_t)(st->zero_cal_left > 0u || st->rs_id.phase == RSID_LOW);
         st->pi.integral_nm = 0.0f;
         st->flux_hyst.out = 1u;
         st->torque_hyst.out = 1u;
@@ -304,26 +322,89 @@ static uint8_t predict_one_period(const ctl *c, const clarke_out *i, float vdc_v
 
 static float clamp_abs(float v, float lim) { return v > lim ? lim : (v < -lim ? -lim : v); }
 
+enum { CTL_STARTUP_DONE = 0, CTL_STARTUP_ZERO_CAL = 1, CTL_STARTUP_RS_ID = 2 };
+
+/* What the start-up does this period, after an enable, in this order:
+ *  - zero calibration (CURRENT_ZERO_CAL_PERIODS): the bridge stays off (vector 0) for N
+ *    periods; no current flows (a spinning rotor's line back-EMF is below the link), so the
+ *    ADCs read their zero plus noise. Its mean replaces the nominal zero, per channel, as
+ *    drive firmware does at start-up;
+ *  - stator-resistance identification (RS_ID_PERIODS, rs_id.h), once: identify_resistance();
+ *  - then the drive runs (st->startup cleared). Out of line: off the control step's path. */
+#if defined(__GNUC__)
+__attribute__((noinline))
+#endif
+static uint8_t startup_phase(ctl *c, const hil_sample *s)
+{
+    ctl_state *st = &c->st;
+    if (st->zero_cal_left > 0u) {
+        float nominal = c->params.current_offset_counts;
+        st->zero_cal_sum1 += (float)s->adc_i1 - nominal;
+        st->zero_cal_sum2 += (float)s->adc_i2 - nominal;
+        if (--st->zero_cal_left == 0u) {
+            float n = (float)c->cfg.zero_cal_periods;
+            c->cfg.clarke.offset1_counts = nominal + st->zero_cal_sum1 / n;
+            c->cfg.clarke.offset2_counts = nominal + st->zero_cal_sum2 / n;
+        }
+        return CTL_STARTUP_ZERO_CAL;
+    }
+    if (st->rs_id.phase >= RSID_LOW && st->rs_id.phase <= RSID_OFF) {
+        return CTL_STARTUP_RS_ID;
+    }
+    st->startup = 0u;
+    return CTL_STARTUP_DONE;
+}
+
+/* One period of the start-up stator-resistance identification (rs_id.h): the current PI in
+ * the encoder's rotor frame, answered with DUTY (SVPWM on the board's DC-link reading, no
+ * dead-time compensation: the two-point method cancels the inverter's error); the hardware
+ * protection stays armed. Its result replaces the board's R (params, flux observer, FOC PI),
+ * so PARAM_GET STATOR_RESISTANCE_OHM reads the identified value. Out of line: it runs only
+ * at start-up and must not cost the control step. */
+#if defined(__GNUC__)
+__attribute__((noinline))
+#endif
+static void identify_resistance(ctl *c, const clarke_out *i, float vdc_v, const hil_sample *s)
+{
+    ctl_state *st = &c->st;
+    float value = 0.0f;
+    uint8_t fault = prot_hardware(&c->cfg.prot, i->i_peak_a, vdc_v, s->status, &value);
+    if (fault != PROT_FAULT_NONE) {
+        ctl_trip(c, fault, value, s->period);
+        return;
+    }
+    float sn, co;
+    fm_sincos(enc_angle_e(&c->cfg.enc, &st->enc), &sn, &co);
+    float i_d = co * i->i_alpha_a + sn * i->i_beta_a;
+    float i_q = co * i->i_beta_a - sn * i->i_alpha_a;
+    float vdc = vdc_v > 1.0f ? vdc_v : 1.0f;
+    float u_d, u_q;
+    if (rsid_step(&c->cfg.rs_id, &st->rs_id, i_d, i_q, vdc * FM_INV_SQRT3, &u_d, &u_q)) {
+        float duty[3];
+        svpwm_duties(co * u_d - sn * u_q, sn * u_d + co * u_q, vdc, duty);
+        st->duty[0] = svpwm_duty_u16(duty[0]);
+        st->duty[1] = svpwm_duty_u16(duty[1]);
+        st->duty[2] = svpwm_duty_u16(duty[2]);
+        st->answer_duty = 1u;
+    } else if (st->rs_id.phase == RSID_DONE) {
+        float r = st->rs_id.r_ohm;
+        c->params.stator_resistance_ohm = r;
+        c->cfg.flux.stator_resistance_ohm = r;
+        fluxobs_derive(&c->cfg.flux);
+        c->cfg.foc.current.stator_resistance_ohm = r;
+        foc_derive(&c->cfg.foc);
+    }
+}
+
 uint8_t ctl_step(ctl *c, const hil_sample *s, hil_telemetry *tm)
 {
     const ctl_cfg *k = &c->cfg;
     ctl_state *st = &c->st;
 
-    /* Start-up zero calibration (CURRENT_ZERO_CAL_PERIODS): after an enable the bridge stays
-     * off (vector 0) for N periods; no current flows (a spinning rotor's line back-EMF is
-     * below the link), so the ADCs read their zero plus noise. Its mean replaces the nominal
-     * zero, per channel, as drive firmware does at start-up. */
+    /* Start-up (zero calibration, resistance identification): the drive waits for it */
     uint8_t calibrating = 0u;
-    if (st->zero_cal_left > 0u && st->state == HIL_STATE_RUNNING) {
-        float nominal = c->params.current_offset_counts;
-        st->zero_cal_sum1 += (float)s->adc_i1 - nominal;
-        st->zero_cal_sum2 += (float)s->adc_i2 - nominal;
-        if (--st->zero_cal_left == 0u) {
-            float n = (float)k->zero_cal_periods;
-            c->cfg.clarke.offset1_counts = nominal + st->zero_cal_sum1 / n;
-            c->cfg.clarke.offset2_counts = nominal + st->zero_cal_sum2 / n;
-        }
-        calibrating = 1u;
+    if (st->startup && st->state == HIL_STATE_RUNNING) {
+        calibrating = startup_phase(c, s);
     }
     clarke_out i;
     clarke_from_adc(&k->clarke, s->adc_i1, s->adc_i2, &i);
@@ -401,6 +482,8 @@ uint8_t ctl_step(ctl *c, const hil_sample *s, hil_telemetry *tm)
                 vector = k->vector_of[sector][(flux_up ? 0u : 2u) + (torque_up ? 0u : 1u)]; /* Table 3 */
             }
         }
+    } else if (calibrating == CTL_STARTUP_RS_ID) {
+        identify_resistance(c, &i, vdc_v, s);
     }
     st->vector_prev3 = st->vector_prev2;
     st->vector_prev2 = st->vector_prev;
@@ -480,6 +563,7 @@ static const param_desc param_table[] = {
     P(HIL_PARAM_DEVICE_DROP_COMP_V, device_drop_comp_v, PT_F32, 0, 0.0f, 10.0f),
     P(HIL_PARAM_DELAY_COMP_PERIODS, delay_comp_periods, PT_U8, 1, 0.0f, 1.0f),
     P(HIL_PARAM_CURRENT_ZERO_CAL_PERIODS, current_zero_cal_periods, PT_U32, 1, 0.0f, 65535.0f),
+    P(HIL_PARAM_RS_ID_PERIODS, rs_id_periods, PT_U32, 1, 0.0f, 65535.0f),
 };
 
 #undef P
@@ -562,6 +646,9 @@ uint8_t ctl_param_set(ctl *c, uint16_t id, float value, float *value_now)
         return HIL_PARAM_OUT_OF_RANGE;
     }
     write_field(&c->params, d, value);
+    if (id == HIL_PARAM_RS_ID_PERIODS) {
+        c->st.rs_id.phase = RSID_IDLE; /* (re)armed: runs at the next enable */
+    }
     ctl_derive(c);
     c->flux_ref_wb = c->cmd.flux_ref_wb > 0.0f ? c->cmd.flux_ref_wb : c->params.flux_ref_wb;
     *value_now = read_field(&c->params, d);

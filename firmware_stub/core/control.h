@@ -23,6 +23,7 @@
 #include "hysteresis.h"
 #include "protection.h"
 #include "rotor_position.h"
+#include "rs_id.h"
 #include "speed_conventional.h"
 #include "speed_ekf.h"
 #include "speed_encoder.h"
@@ -66,6 +67,7 @@ typedef struct {
     float device_drop_comp_v; /* DTC observer voltage, 0 = off */
     uint8_t delay_comp_periods; /* DTC: 1 = answers act one period late: integrate the vector that acted, predict */
     uint32_t current_zero_cal_periods; /* at each enable, this many periods with the bridge off to measure the current ADCs' zero, 0 = off */
+    uint32_t rs_id_periods; /* start-up stator-resistance identification, periods per current level (rs_id.h), 0 = off */
 } ctl_params;
 
 /* HIL_PARAM_CONTROL_LAW: the paper's DTC answers GATES, FOC answers DUTY */
@@ -92,6 +94,7 @@ typedef struct {
     uint8_t inv_comp_on; /* dead time or device drop compensated */
     uint8_t delay_comp;  /* delay_comp_periods */
     uint32_t zero_cal_periods; /* current_zero_cal_periods */
+    rsid_cfg rs_id;            /* rs_id_periods and the design values of defaults.h */
     uint8_t dtc_comp;    /* either of the two: the observer takes the compensated path */
     uint8_t control_law;
     uint8_t foc_angle_source;
@@ -133,9 +136,11 @@ typedef struct {
     uint8_t vector_prev2; /* the answer before it (the vector that acted, with one period of delay) */
     uint8_t vector_prev3; /* and before that (the dead-time edge, with one period of delay) */
     uint8_t state;      /* hil_state */
+    uint8_t startup;        /* 1 after an enable until the zero calibration and the R identification are done */
     uint32_t zero_cal_left; /* periods of the start-up zero calibration still to run */
     float zero_cal_sum1;    /* sums of adc_i1, adc_i2 minus the nominal zero over them */
     float zero_cal_sum2;
+    rsid_state rs_id; /* the stator-resistance identification: runs once, after the zero calibration of the first enable */
     uint8_t fault_code; /* hil_fault_code latched */
     float fault_value;
     uint32_t fault_period;

@@ -41,6 +41,13 @@
 #define CTL_DEFAULT_DEVICE_DROP_COMP_V 0.0f  /* DTC observer; the paper's plant has no device drop */
 #define CTL_DEFAULT_DELAY_COMP_PERIODS 0u    /* DTC; the paper's answer acts at once */
 #define CTL_DEFAULT_CURRENT_ZERO_CAL_PERIODS 0u /* the paper's sensors have no offset */
+/* Start-up stator-resistance identification (rs_id.h, docs/stub.md) */
+#define CTL_DEFAULT_RS_ID_PERIODS 0u           /* off: the paper's board knows its R */
+#define CTL_DESIGN_RS_ID_CURRENT_LOW_A 2.0f    /* the other two phases carry -1 A, 10x the devices' 0.1 A knee */
+#define CTL_DESIGN_RS_ID_CURRENT_HIGH_A 4.0f   /* 28 % of the 14.4 A of the torque limit */
+#define CTL_DESIGN_RS_ID_BANDWIDTH_HZ 500.0f /* its current PI: passes sigma_n sqrt(pi f / f_s) = 0.28 of the ADC noise to the true current */
+#define CTL_DESIGN_RS_ID_OFF_S 1e-3f           /* bridge open after it: 4 A decays through the diodes in 0.4 ms */
+#define CTL_DESIGN_RS_ID_MAX_SPEED_RAD_S 1.0f  /* runs only with the rotor at standstill (encoder speed) */
 #define CTL_DESIGN_DEAD_TIME_COMP_BAND_A 0.1f /* linear zone of sign(i): 8 ADC counts, 16x the 0.5-count noise */
 
 /* python -m hil.ekf_design (DLQE by the discrete Riccati equation) for the

@@ -126,7 +126,8 @@ typedef enum {
     HIL_PARAM_DEAD_TIME_COMP_S = 63,    /* dead-time compensation by current sign (FOC duties, DTC observer voltage), 0 = off */
     HIL_PARAM_DEVICE_DROP_COMP_V = 64,  /* DTC: device drop compensated in the observer voltage, 0 = off */
     HIL_PARAM_DELAY_COMP_PERIODS = 65,  /* DTC: 1 = answers act one period late; integrate what acted, predict one period */
-    HIL_PARAM_CURRENT_ZERO_CAL_PERIODS = 66 /* at each enable, periods with the bridge off to measure the current ADCs' zero, 0 = off */
+    HIL_PARAM_CURRENT_ZERO_CAL_PERIODS = 66, /* at each enable, periods with the bridge off to measure the current ADCs' zero, 0 = off */
+    HIL_PARAM_RS_ID_PERIODS = 67 /* start-up stator-resistance identification at standstill, periods per current level, 0 = off */
 } hil_param_id;
 
 typedef struct {
