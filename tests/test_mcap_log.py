@@ -491,8 +491,14 @@ def test_write_many_gives_the_same_file_as_one_write_per_message(tmp_path):
 def test_write_many_refuses_values_that_do_not_fit(tmp_path):
     log = McapLog(tmp_path / "bad.mcap")
     ch = log.add_fixed_channel("/s", "hil.S", [("k", "fixed32"), ("x", "double")])
-    with pytest.raises(ValueError, match="/s: a value does not fit"):
+    with pytest.raises(ValueError, match="/s: a value does not fit.*'k' = -1.0: outside 0..4294967295"):
         ch.write_many([0, 1], [[1, 0.0], [-1, 0.0]])          # fixed32 cannot hold -1
+    with pytest.raises(ValueError, match="'k' = 2.5: a whole number is expected"):
+        ch.write_many([0, 1], [[1, 0.0], [2.5, 0.0]])
+    with pytest.raises(ValueError, match="'k' = nan: a whole number is expected"):
+        ch.write_many([0, 1], [[float("nan"), 0.0], [2, 0.0]])
+    with pytest.raises(ValueError, match="'k' = 4294967296.0: outside"):
+        ch.write_many([0], [[2.0 ** 32, 0.0]])
     with pytest.raises(ValueError, match="/s: expected 2 rows of 2 values"):
         ch.write_many([0, 1], [[1, 0.0, 3.0], [2, 0.0, 3.0]])
     log.close()
