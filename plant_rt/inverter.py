@@ -170,7 +170,12 @@ class SwitchTimeline:
     bits) are switches stuck on or off whatever they are told (a fault): applied to every
     interval's word, after dead time, so a stuck-on switch meeting its commanded partner is a
     shoot-through like any other.
+
+    ``kernel``: the plant's C kernel (plant_rt.ckernel), which then computes _duty_windows;
+    None (the default) keeps the Python code.
     """
+
+    kernel = None
 
     def __init__(self, period_s: float, delay_s: float, dead_time_s: float):
         self.period_s = period_s
@@ -268,6 +273,8 @@ class SwitchTimeline:
         command of switch j is on in one centre window (high side) or around it (low side);
         turn-on edges come td later, a command that has been on since the last period keeps
         the rise it had (dead time across the period boundary)."""
+        if self.kernel is not None:
+            return self.kernel.duty_windows(self.period_s, self.dead_time_s, duty, self._rise)
         T = self.period_s
         td = self.dead_time_s
         rise = self._rise

@@ -131,6 +131,7 @@ class Plant:
         self._vectors: list = [None] * 64
         self._ckernel = ckernel.KERNEL
         self.network.ckernel = self._ckernel
+        self._timeline.kernel = self._ckernel
         self._rebuild()
 
     @property
@@ -151,6 +152,7 @@ class Plant:
             kernel = on
         self._ckernel = kernel
         self.network.ckernel = kernel
+        self._timeline.kernel = kernel
 
     # --------------------------------------------------------------- helpers
     def _rebuild(self) -> None:
@@ -500,8 +502,14 @@ class Plant:
         va, vb, ga, gb, _ = vec
         n = max(1, math.ceil(length / self._h_max - 1e-9))
         pa0, pb0 = y[0], y[1]
-        y[0], y[1], y[2], y[3] = motor.advance(pa0, pb0, y[2], y[3], va, vb, length / n, n, v0,
-                                               slope, motor.b + self.load.kw)
+        kernel = self._ckernel
+        if kernel is not None:
+            y[0], y[1], y[2], y[3] = kernel.advance(motor._k, motor.spm, pa0, pb0, y[2], y[3], va,
+                                                    vb, length / n, n, v0, slope,
+                                                    motor.b + self.load.kw)
+        else:
+            y[0], y[1], y[2], y[3] = motor.advance(pa0, pb0, y[2], y[3], va, vb, length / n, n,
+                                                   v0, slope, motor.b + self.load.kw)
         acc[0] += va * length
         acc[1] += vb * length
         acc[2] += (ga * (va * length - (y[0] - pa0)) + gb * (vb * length - (y[1] - pb0))) / motor.r

@@ -42,7 +42,8 @@ class Counting:
     """The extension with its calls counted (and optionally its motor constants changed)."""
 
     def __init__(self, scale_r: float = 1.0):
-        self.calls = {"integrate": 0, "settle": 0, "leg_period": 0}
+        self.calls = {"integrate": 0, "settle": 0, "leg_period": 0, "advance": 0,
+                      "duty_windows": 0}
         self.scale_r = scale_r
 
     def _k(self, k):
@@ -61,6 +62,14 @@ class Counting:
     def leg_period(self, k, *args):
         self.calls["leg_period"] += 1
         return ckernel.EXTENSION.leg_period(self._k(k), *args)
+
+    def advance(self, k, *args):
+        self.calls["advance"] += 1
+        return ckernel.EXTENSION.advance(self._k(k), *args)
+
+    def duty_windows(self, *args):
+        self.calls["duty_windows"] += 1
+        return ckernel.EXTENSION.duty_windows(*args)
 
 
 def make(kernel, overrides: dict, setup=None) -> Plant:
@@ -121,6 +130,7 @@ def test_pwm_with_dead_time_and_drop_c_equals_python(speed):
                                  seed=1)
     assert worst <= LIMIT
     assert kernel.calls["leg_period"] > 0 and kernel.calls["integrate"] > 0
+    assert kernel.calls["duty_windows"] > 0
     assert ref.network.events > 20          # diode zero crossings and knee crossings were met
 
 
@@ -130,6 +140,7 @@ def test_pwm_with_dead_time_through_zero_crossings_from_standstill():
                                   "initial": {"speed_rad_s": 0.0}}, 1500, seed=2)
     assert worst <= LIMIT
     assert kernel.calls["integrate"] > 0 and ref.network.events > 0
+    assert kernel.calls["advance"] > 0      # driven and diode intervals of the general path
 
 
 @needs_kernel
@@ -167,6 +178,18 @@ def test_the_comparison_fails_when_the_c_side_gets_a_perturbed_resistance():
     worst, kernel, _ = compare({"inverter": DROP}, 400, seed=5, kernel=Counting(scale_r=1 + 1e-9))
     assert kernel.calls["leg_period"] > 0
     assert worst > 100 * LIMIT
+
+
+@needs_kernel
+def test_duty_windows_c_equal_python_and_carry_the_dead_time_across_periods():
+    from plant_rt.inverter import SwitchTimeline
+    rng = random.Random(6)
+    c_tl, py_tl = SwitchTimeline(50e-6, 0.0, 2e-6), SwitchTimeline(50e-6, 0.0, 2e-6)
+    c_tl.kernel = ckernel.EXTENSION
+    for _ in range(500):
+        duty = tuple(rng.choice((0.0, 1.0, rng.random())) for _ in range(3))
+        assert c_tl._duty_windows(duty) == py_tl._duty_windows(duty)
+        assert c_tl._rise == py_tl._rise
 
 
 @needs_kernel

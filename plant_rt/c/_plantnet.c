@@ -12,6 +12,8 @@
  *   leg_period  Plant._leg_period: a PWM period as constant-vector pieces from the legs'
  *               switch windows, integrated piece by piece (MotorModel.advance_pieces), with
  *               the sign check of Plant._signs_hold.
+ *   advance     MotorModel.advance (the driven and diode intervals of the general path).
+ *   duty_windows  SwitchTimeline._duty_windows (the switches' on-intervals of a duty command).
  *
  * Why hand-written C: with PWM, dead time and device drop the plant spends its time in the
  * Python interpreter's per-call overhead (about 50 RHS evaluations per 50 us period, each a few
@@ -688,6 +690,67 @@ static void advance_general(const cfg_t *m, double *st, double va, double vb, do
     st[3] = th;
 }
 
+/* MotorModel.advance's Ld = Lq form (its own time bookkeeping: t accumulates h). */
+static void advance_spm(const cfg_t *m, double *st, double va, double vb, double h, long n,
+                        double tl0, double tl_slope, double bw)
+{
+    double p = m->p, r = m->r, psim = m->psim, ild = m->ild, ij = m->ij, kt = m->kt;
+    double pa = st[0], pb = st[1], w = st[2], th = st[3];
+    double h2 = 0.5 * h;
+    double h6 = h / 6.0;
+    double t = 0.0;
+    double ril = r * ild;
+    double rk = r * psim * ild;
+    double kti = kt * psim * ild;
+    for (long i = 0; i < n; i++) {
+        double tl1 = tl0 + tl_slope * t;
+        double tl2 = tl1 + tl_slope * h2;
+        double tl4 = tl1 + tl_slope * h;
+        double e = p * th;
+        double c = cos(e);
+        double s = sin(e);
+        double d1a = va - ril * pa + rk * c;
+        double d1b = vb - ril * pb + rk * s;
+        double d1w = (kti * (c * pb - s * pa) - bw * w - tl1) * ij;
+        double xa = pa + h2 * d1a;
+        double xb = pb + h2 * d1b;
+        double w2 = w + h2 * d1w;
+        e = p * (th + h2 * w);
+        c = cos(e);
+        s = sin(e);
+        double d2a = va - ril * xa + rk * c;
+        double d2b = vb - ril * xb + rk * s;
+        double d2w = (kti * (c * xb - s * xa) - bw * w2 - tl2) * ij;
+        xa = pa + h2 * d2a;
+        xb = pb + h2 * d2b;
+        double w3 = w + h2 * d2w;
+        e = p * (th + h2 * w2);
+        c = cos(e);
+        s = sin(e);
+        double d3a = va - ril * xa + rk * c;
+        double d3b = vb - ril * xb + rk * s;
+        double d3w = (kti * (c * xb - s * xa) - bw * w3 - tl2) * ij;
+        xa = pa + h * d3a;
+        xb = pb + h * d3b;
+        double w4 = w + h * d3w;
+        e = p * (th + h * w3);
+        c = cos(e);
+        s = sin(e);
+        double d4a = va - ril * xa + rk * c;
+        double d4b = vb - ril * xb + rk * s;
+        double d4w = (kti * (c * xb - s * xa) - bw * w4 - tl4) * ij;
+        pa += h6 * (d1a + 2.0 * (d2a + d3a) + d4a);
+        pb += h6 * (d1b + 2.0 * (d2b + d3b) + d4b);
+        th += h6 * (w + 2.0 * (w2 + w3) + w4);
+        w += h6 * (d1w + 2.0 * (d2w + d3w) + d4w);
+        t += h;
+    }
+    st[0] = pa;
+    st[1] = pb;
+    st[2] = w;
+    st[3] = th;
+}
+
 /* MotorModel.advance_pieces; st = (pa, pb, w, th) in and out, returns int g . i dt. */
 static double advance_pieces(const cfg_t *m, int spm, double *st, const piece_t *pieces,
                              int npieces, double h_max, double tl0, double tl_slope, double bw)
@@ -1225,10 +1288,194 @@ static PyObject *mod_leg_period(PyObject *self, PyObject *const *args, Py_ssize_
     return Py_BuildValue("(ddddddd i)", st[0], st[1], st[2], st[3], out[0], out[1], out[2], h_end);
 }
 
+PyDoc_STRVAR(advance_doc,
+"advance(motor_k, spm, pa, pb, w, th, va, vb, h, n, tl0, tl_slope, bw) -> (pa, pb, w, th)\n\n"
+"MotorModel.advance: n RK4 steps of length h at the constant stator voltage (va, vb), load\n"
+"torque tl0 + tl_slope t + bw w.");
+
+static PyObject *mod_advance(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    (void)self;
+    if (nargs != 13) {
+        PyErr_SetString(PyExc_TypeError, "advance takes 13 arguments");
+        return NULL;
+    }
+    double k[8], f[11];
+    cfg_t m;
+    memset(&m, 0, sizeof m);
+    if (get_doubles(args[0], k, 8, "motor constants") < 0) {
+        return NULL;
+    }
+    int spm = PyObject_IsTrue(args[1]);
+    if (spm < 0) {
+        return NULL;
+    }
+    for (int i = 0; i < 11; i++) {
+        if (i == 7) { /* n */
+            continue;
+        }
+        if (get_double(args[2 + i], &f[i]) < 0) {
+            return NULL;
+        }
+    }
+    long n = PyLong_AsLong(args[9]);
+    if (n == -1 && PyErr_Occurred()) {
+        return NULL;
+    }
+    m.p = k[0];
+    m.r = k[1];
+    m.psim = k[2];
+    m.ild = k[3];
+    m.ilq = k[4];
+    m.ij = k[5];
+    m.b = k[6];
+    m.kt = k[7];
+    double st[4] = {f[0], f[1], f[2], f[3]};
+    if (spm) {
+        advance_spm(&m, st, f[4], f[5], f[6], n, f[8], f[9], f[10]);
+    } else {
+        advance_general(&m, st, f[4], f[5], f[6], n, f[8], f[9], f[10]);
+    }
+    return Py_BuildValue("(dddd)", st[0], st[1], st[2], st[3]);
+}
+
+/* rise[j] as Python keeps it: None (commanded off) or the time of the last rising edge. */
+static int rise_get(PyObject *rise, int j, int *has, double *r)
+{
+    PyObject *o = PyList_GET_ITEM(rise, j);
+    if (o == Py_None) {
+        *has = 0;
+        *r = 0.0;
+        return 0;
+    }
+    *has = 1;
+    return get_double(o, r);
+}
+
+static int rise_set(PyObject *rise, int j, int has, double r)
+{
+    PyObject *o;
+    if (has) {
+        o = PyFloat_FromDouble(r);
+        if (o == NULL) {
+            return -1;
+        }
+    } else {
+        o = Py_None;
+        Py_INCREF(o);
+    }
+    return PyList_SetItem(rise, j, o); /* steals o */
+}
+
+static int append_window(PyObject *lst, double a, double b)
+{
+    PyObject *w = Py_BuildValue("(dd)", a, b);
+    if (w == NULL) {
+        return -1;
+    }
+    int rc = PyList_Append(lst, w);
+    Py_DECREF(w);
+    return rc;
+}
+
+PyDoc_STRVAR(duty_windows_doc,
+"duty_windows(T, dead_time, duty, rise) -> [[(on, off), ...] x 6]\n\n"
+"SwitchTimeline._duty_windows: per switch its on-intervals in [0, T) for a duty command with\n"
+"no delay in play, turn-on edges delayed by the dead time; updates the list rise (6 items,\n"
+"None or the time of the command's last rising edge) in place.");
+
+static PyObject *mod_duty_windows(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    (void)self;
+    if (nargs != 4) {
+        PyErr_SetString(PyExc_TypeError, "duty_windows takes 4 arguments");
+        return NULL;
+    }
+    double T, td, duty[3];
+    if (get_double(args[0], &T) < 0 || get_double(args[1], &td) < 0 ||
+        get_doubles(args[2], duty, 3, "duty") < 0) {
+        return NULL;
+    }
+    PyObject *rise = args[3];
+    if (!PyList_Check(rise) || PyList_GET_SIZE(rise) != 6) {
+        PyErr_SetString(PyExc_TypeError, "rise must be a list of 6 items");
+        return NULL;
+    }
+    PyObject *out = PyList_New(6);
+    if (out == NULL) {
+        return NULL;
+    }
+    for (int j = 0; j < 6; j++) {
+        PyObject *lst = PyList_New(0);
+        if (lst == NULL) {
+            Py_DECREF(out);
+            return NULL;
+        }
+        PyList_SET_ITEM(out, j, lst);
+    }
+    for (int x = 0; x < 3; x++) {
+        double d = duty[x];
+        int jh = 2 * x, jl = 2 * x + 1;
+        PyObject *hi = PyList_GET_ITEM(out, jh), *lo = PyList_GET_ITEM(out, jl);
+        int has;
+        double r, a;
+        if (d >= 1.0 || d <= 0.0) {
+            int jon = d >= 1.0 ? jh : jl, joff = d >= 1.0 ? jl : jh;
+            if (rise_get(rise, jon, &has, &r) < 0) {
+                goto fail;
+            }
+            if (!has) {
+                a = td;
+            } else {
+                double z = r + td;
+                a = 0.0 > z ? 0.0 : z;
+            }
+            if (a < T && append_window(d >= 1.0 ? hi : lo, a, T) < 0) {
+                goto fail;
+            }
+            if (rise_set(rise, jon, 1, (has ? r : 0.0) - T) < 0 || rise_set(rise, joff, 0, 0.0) < 0) {
+                goto fail;
+            }
+            continue;
+        }
+        double t_on = 0.5 * T * (1.0 - d);
+        double t_off = 0.5 * T * (1.0 + d);
+        a = t_on + td;
+        if (a < t_off && append_window(hi, a, t_off) < 0) {
+            goto fail;
+        }
+        if (rise_set(rise, jh, 0, 0.0) < 0 || rise_get(rise, jl, &has, &r) < 0) {
+            goto fail;
+        }
+        if (!has) {
+            a = td;
+        } else {
+            double z = r + td;
+            a = 0.0 > z ? 0.0 : z;
+        }
+        if (a < t_on && append_window(lo, a, t_on) < 0) {
+            goto fail;
+        }
+        a = t_off + td;
+        if (a < T && append_window(lo, a, T) < 0) {
+            goto fail;
+        }
+        if (rise_set(rise, jl, 1, t_off - T) < 0) {
+            goto fail;
+        }
+    }
+    return out;
+fail:
+    Py_DECREF(out);
+    return NULL;
+}
+
 static PyMethodDef methods[] = {
     {"integrate", (PyCFunction)(void (*)(void))mod_integrate, METH_FASTCALL, integrate_doc},
     {"settle", (PyCFunction)(void (*)(void))mod_settle, METH_FASTCALL, settle_doc},
     {"leg_period", (PyCFunction)(void (*)(void))mod_leg_period, METH_FASTCALL, leg_period_doc},
+    {"advance", (PyCFunction)(void (*)(void))mod_advance, METH_FASTCALL, advance_doc},
+    {"duty_windows", (PyCFunction)(void (*)(void))mod_duty_windows, METH_FASTCALL, duty_windows_doc},
     {NULL, NULL, 0, NULL},
 };
 
@@ -1262,7 +1509,7 @@ PyMODINIT_FUNC PyInit__plantnet(void)
         return NULL;
     }
     /* The kernel's interface version: plant_rt/ckernel.py refuses a build of another one. */
-    if (PyModule_AddIntConstant(mod, "ABI", 1) < 0) {
+    if (PyModule_AddIntConstant(mod, "ABI", 2) < 0) {
         Py_DECREF(mod);
         return NULL;
     }
