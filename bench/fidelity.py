@@ -15,6 +15,9 @@ through the C codec) on the plant, encoder speed feedback, in lockstep:
   0.55 s back to 1500 rpm, 1 Nm load ramped in 40 ms
   0.90 s ..1.00 s steady 1500 rpm, 1 Nm            Fig. 10: rotor position errors (plan 05's point)
 
+With the start-up resistance identification on (RS_ID_PERIODS, the hardware profile's default),
+its periods run before 0, unmeasured, so the drive starts at the same time into the sequence.
+
 Scenarios: the ideal `paper` profile; each non-ideality of `paper-hardware` alone (its value
 taken from that profile), with and without its compensation; all of them together
 (`paper-hardware` itself) with no, each and both compensations.
@@ -35,7 +38,7 @@ RPM = 2 * math.pi / 60
 
 # Board parameters that switch the compensations off (the hardware profile turns them on).
 COMP_OFF = {"dead_time_comp_s": 0.0, "device_drop_comp_v": 0.0, "delay_comp_periods": 0.0,
-            "current_zero_cal_periods": 0.0}
+            "current_zero_cal_periods": 0.0, "rs_id_periods": 0.0}
 
 
 def _hardware_pieces() -> dict[str, dict]:
@@ -76,6 +79,7 @@ def scenarios(quick: bool = False) -> list[tuple[str, Path, dict, dict]]:
         ("hardware, dead time + drop comp", HARDWARE, {}, {**COMP_OFF, **dt_comp, **drop_comp}),
         ("hardware, delay comp", HARDWARE, {}, {**COMP_OFF, **delay_comp}),
         ("hardware, all comp but the zero calibration", HARDWARE, {}, {"current_zero_cal_periods": 0.0}),
+        ("hardware, all comp but the R identification", HARDWARE, {}, {"rs_id_periods": 0.0}),
         ("hardware, all comp (profile default)", HARDWARE, {}, {}),
     ]
     if quick:
@@ -92,7 +96,7 @@ def closed_loop(profile_path: Path, overrides: dict, board: dict, seed: int = 1)
     from hil.links.stub_library import StubLibraryLink
     from hil.session.board_params import board_parameters, load_bench_profile
     from plant_rt import TRUTH_FIELDS, Plant
-    from protocol.messages import Command, Gates, ParamId, ParamSet, ParamValue, Sample, Telemetry
+    from protocol.messages import Command, Duty, Gates, ParamId, ParamSet, ParamValue, Sample, Telemetry
 
     profile = load_bench_profile(profile_path, overrides or None)
     plant, link = Plant(profile, seed=seed), StubLibraryLink()
@@ -106,30 +110,41 @@ def closed_loop(profile_path: Path, overrides: dict, board: dict, seed: int = 1)
         if answer is None or answer.status != 0:
             raise RuntimeError(f"board refused {name} = {value}: {answer}")
     f = {name: i for i, name in enumerate(TRUTH_FIELDS)}
-    phases = [(0.25, 1500.0, None), (0.30, 3000.0, None), (0.45, 1500.0, 1.0)]
+    # The start-up resistance identification (RS_ID_PERIODS, two levels and 1 ms with the
+    # bridge open) runs before the sequence, unmeasured, so that the drive starts at the same
+    # time into it as without one (after the zero calibration, as before).
+    rs_id = int(params.get("rs_id_periods", 0))
+    startup = 2 * rs_id + 20 if rs_id else 0
+    phases = [(startup * T, 1500.0, None, False), (0.25, 1500.0, None, True), (0.30, 3000.0, None, True),
+              (0.45, 1500.0, 1.0, True)]
     rows, tms = [], []
     tripped = None
-    for duration, rpm, load in phases:
+    for duration, rpm, load, measured in phases:
         link.send(Command(1, 0, rpm * RPM, 0.0, 0.0))
         if load is not None:
             plant.load.set_ramp(load, 0.04)
         for _ in range(int(round(duration / T))):
             s = plant.sample()
             link.send(Sample(s.period, s.adc_i1, s.adc_i2, s.adc_vdc, s.encoder, s.status))
-            gates, tm = None, None
+            gates, duty, tm = None, None, None
             msg = link.recv()
             while msg is not None:
                 if isinstance(msg, Gates):
                     gates = msg.gates
+                elif isinstance(msg, Duty):
+                    duty = tuple(d / 65535.0 for d in msg.duty)
                 elif isinstance(msg, Telemetry):
                     tm = msg
                 msg = link.recv()
+            if not measured:
+                plant.step(gates, duty)
+                continue
             rows.append(plant.truth())
             tms.append((tm.speed_ekf_rad_s, tm.speed_lpf_rad_s, tm.speed_raw_rad_s, tm.rotor_pos_conv_rad,
                         tm.rotor_pos_ekf_rad, tm.flux_mag_wb, tm.flux_angle_rad, tm.state))
             if tm.state == 2 and tripped is None:  # HIL_STATE_FAULT
                 tripped = len(rows) * T
-            plant.step(gates)
+            plant.step(gates, duty)
     tr, est = np.array(rows), np.array(tms)
     w = tr[:, f["speed_rad_s"]]
     n = lambda s: int(round(s / T))  # noqa: E731
@@ -255,7 +270,8 @@ def plan05_one_error_away() -> dict:
     plan = load_plan(PAPER_PLANS[4])
     exact = {"R exact (plant 0.466 ohm)": {"motor": {"resistance_ohm": 0.466}},
              "DC-link reading exact": {"sensors": {"dc_voltage": {
-                 "offset_counts": 0.0, "gain": 1.0}}}}
+                 "offset_counts": 0.0, "gain": 1.0}}},
+             "R identification off (the board's cold R)": {"controller": {"rs_id_periods": 0}}}
     out = {}
     with tempfile.TemporaryDirectory() as tmp:
         for name, override in exact.items():
