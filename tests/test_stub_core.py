@@ -49,7 +49,7 @@ class SpiState(C.Structure):
 class FluxCfg(C.Structure):
     _fields_ = [("stator_resistance_ohm", F32), ("stator_inductance_h", F32), ("magnet_flux_wb", F32),
                 ("control_period_s", F32), ("drift_cutoff_hz", F32), ("magnet_flux_sq_wb2", F32),
-                ("drift_gain_per_step", F32)]
+                ("drift_gain_per_step", F32), ("half_r_t_ohm_s", F32)]
 
 
 class FluxState(C.Structure):
