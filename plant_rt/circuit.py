@@ -95,6 +95,18 @@ class Network:
         """The load profile is v0 + slope (t - t_a) over the coming interval (no knot in it)."""
         self._tl = (t_a, v0, slope)
 
+    def legs_code(self) -> int:
+        """The legs of the last begin() for the C kernel: l0 + 5 l1 + 25 l2, -1 for none."""
+        legs = self._legs
+        return -1 if legs is None else legs[0] + 5 * legs[1] + 25 * legs[2]
+
+    def set_state(self, kinds, legs_code: int, events: int, overflows: int) -> None:
+        """The state a C kernel call left: phase states, last legs (legs_code), counts."""
+        self._configure(list(kinds))
+        self._legs = None if legs_code < 0 else (legs_code % 5, legs_code // 5 % 5, legs_code // 25)
+        self.events += events
+        self.event_overflows += overflows
+
     def _cfg(self) -> tuple:
         """The parameters the C kernel takes besides the motor's constants."""
         dc, load = self.dc, self.load

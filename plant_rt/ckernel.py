@@ -27,7 +27,7 @@ from pathlib import Path
 
 BUILD_DIR = Path(__file__).resolve().parent / "c" / "build"
 #: The interface this module speaks (the extension's ABI constant).
-ABI = 2
+ABI = 3
 
 
 def extension_path() -> Path:

@@ -293,6 +293,23 @@ class Plant:
         y = [self._pa, self._pb, self._w, self._th, self._vcap]
         acc = [0.0, 0.0, 0.0]
         fast = self._fast_ok and not self.load.locked
+        kernel = self._ckernel
+        if kernel is not None and not fast:
+            # Every interval goes to the network: with no load knot in the period the kernel
+            # runs the loop below (begin + integrate per interval) in one call.
+            v0, slope, t_next = self._load_segment(t0)
+            if t_next - t0 >= T:
+                seg_t, seg_v0, seg_slope, _ = self._load_seg
+                y, kinds, last, events, overflows, net.vdc, ran = kernel.period(
+                    self.motor._k, net._cfg(), net.kinds, net.legs_code(), intervals, t0, T, y,
+                    self._h_max, acc, seg_t, seg_v0, seg_slope, net.vdc)
+                net.set_state(kinds, last, events, overflows)
+                for _, _, word in intervals:
+                    if _SHOOT_THROUGH[word]:
+                        self._flags |= STATUS_GATE_FAULT
+                if ran:
+                    self._net_dirty = True
+                intervals = ()
         for a, b, word in intervals:
             if _SHOOT_THROUGH[word]:
                 self._flags |= STATUS_GATE_FAULT

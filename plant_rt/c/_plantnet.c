@@ -9,6 +9,8 @@
  *               crossing the device-drop knee), the state transitions they cause, the coast
  *               with no current at all.
  *   settle      Network._settle after Network.begin: the turn-on conditions that hold now.
+ *   period      Plant._general's loop over a period's intervals when all go to the network
+ *               (Network.begin and Network.integrate for each).
  *   leg_period  Plant._leg_period: a PWM period as constant-vector pieces from the legs'
  *               switch windows, integrated piece by piece (MotorModel.advance_pieces), with
  *               the sign check of Plant._signs_hold.
@@ -982,6 +984,140 @@ static PyObject *mod_integrate(PyObject *self, PyObject *const *args, Py_ssize_t
                          n.kinds[2], n.events, n.overflows, n.vdc);
 }
 
+/* Network.begin: the phase states for an interval with the given leg states (H, L or O).
+ * *last is the legs of the last begin (-1: none, i.e. Network._legs is None). */
+static void begin(net_t *n, double t, double *y, const int legs[3], int *last)
+{
+    int code = legs[0] + 5 * legs[1] + 25 * legs[2];
+    if (code == *last) {
+        return;
+    }
+    *last = code;
+    double ia, ib;
+    double e = n->c.p * y[3];
+    double c = cos(e), s = sin(e);
+    double i_d = (c * y[0] + s * y[1] - n->c.psim) * n->c.ild;
+    double i_q = (c * y[1] - s * y[0]) * n->c.ilq;
+    ia = c * i_d - s * i_q;
+    ib = s * i_d + c * i_q;
+    double cur[3] = {ia, -0.5 * ia + S32 * ib, -0.5 * ia - S32 * ib};
+    int kinds[3];
+    for (int x = 0; x < 3; x++) {
+        if (x == n->c.open_phase) {
+            kinds[x] = K_O;
+        } else if (legs[x] != K_O) {
+            kinds[x] = legs[x];
+        } else if (n->kinds[x] == K_P || n->kinds[x] == K_N || n->kinds[x] == K_O) {
+            kinds[x] = n->kinds[x];
+        } else if (cur[x] > ZERO_CURRENT_A) {
+            kinds[x] = K_P;
+        } else if (cur[x] < -ZERO_CURRENT_A) {
+            kinds[x] = K_N;
+        } else {
+            kinds[x] = K_O;
+        }
+    }
+    configure(n, kinds);
+    if (n->nzero) {
+        project(n, y);
+        settle(n, t, y);
+    }
+}
+
+static const int LEG_BITS[3][2] = {{0x01, 0x02}, {0x04, 0x08}, {0x10, 0x20}};
+
+PyDoc_STRVAR(period_doc,
+"period(motor_k, cfg, kinds, last_legs, intervals, t0, T, y, h_max, acc, seg_t, seg_v0, slope,\n"
+"       vdc) -> (y, kinds, last_legs, events, overflows, vdc, intervals_run)\n\n"
+"Plant._general's loop when every interval goes to the network and no load knot falls in the\n"
+"period: for each (a, b, word) of intervals, Network.begin with the word's leg states and\n"
+"Network.integrate over [t0 + a, t0 + b], the load profile seg_v0 + slope (t - seg_t).\n"
+"last_legs: the legs of the network's last begin coded l0 + 5 l1 + 25 l2, -1 for none;\n"
+"vdc: the network's last v_dc (returned as it is when no interval runs).");
+
+static PyObject *mod_period(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    (void)self;
+    if (nargs != 14) {
+        PyErr_SetString(PyExc_TypeError, "period takes 14 arguments");
+        return NULL;
+    }
+    net_t n;
+    memset(&n, 0, sizeof n);
+    double t0, T, y[5], acc[3], h_max, seg_t, seg_v0, slope;
+    int kinds[3];
+    long last_l = PyLong_AsLong(args[3]);
+    if (last_l == -1 && PyErr_Occurred()) {
+        return NULL;
+    }
+    if (get_cfg(args[0], args[1], &n.c) < 0 || get_kinds(args[2], kinds) < 0 ||
+        get_double(args[5], &t0) < 0 || get_double(args[6], &T) < 0 ||
+        get_doubles(args[7], y, 5, "y") < 0 || get_double(args[8], &h_max) < 0 ||
+        get_double(args[10], &seg_t) < 0 || get_double(args[11], &seg_v0) < 0 ||
+        get_double(args[12], &slope) < 0 || get_double(args[13], &n.vdc) < 0) {
+        return NULL;
+    }
+    PyObject *intervals = args[4], *acc_list = args[9];
+    if (!PyList_Check(intervals)) {
+        PyErr_SetString(PyExc_TypeError, "intervals must be a list of (a, b, word)");
+        return NULL;
+    }
+    if (!PyList_Check(acc_list) || get_doubles(acc_list, acc, 3, "acc") < 0) {
+        if (!PyErr_Occurred()) {
+            PyErr_SetString(PyExc_TypeError, "acc must be a list of 3 floats");
+        }
+        return NULL;
+    }
+    if (!(h_max > 0.0) || !(T > 0.0) || !isfinite(t0)) {
+        PyErr_SetString(PyExc_ValueError, "period: need h_max > 0, T > 0, t0 finite");
+        return NULL;
+    }
+    int last = (int)last_l;
+    configure(&n, kinds);
+    int ran = 0;
+    Py_ssize_t count = PyList_GET_SIZE(intervals);
+    for (Py_ssize_t i = 0; i < count; i++) {
+        PyObject *iv = PyList_GET_ITEM(intervals, i);
+        if (!PyTuple_Check(iv) || PyTuple_GET_SIZE(iv) != 3) {
+            PyErr_SetString(PyExc_TypeError, "intervals must be a list of (a, b, word)");
+            return NULL;
+        }
+        double a, b;
+        if (get_double(PyTuple_GET_ITEM(iv, 0), &a) < 0 ||
+            get_double(PyTuple_GET_ITEM(iv, 1), &b) < 0) {
+            return NULL;
+        }
+        long word = PyLong_AsLong(PyTuple_GET_ITEM(iv, 2));
+        if (word == -1 && PyErr_Occurred()) {
+            return NULL;
+        }
+        if (!(b - a > 1e-15 * T)) {
+            continue;
+        }
+        int legs[3];
+        for (int x = 0; x < 3; x++) {
+            int on_h = (word & LEG_BITS[x][0]) != 0, on_l = (word & LEG_BITS[x][1]) != 0;
+            legs[x] = on_h && !on_l ? K_H : on_l && !on_h ? K_L : K_O;
+        }
+        double ta = t0 + a;
+        n.c.tl_t = ta;
+        n.c.tl_v0 = seg_v0 + slope * (ta - seg_t);
+        n.c.tl_slope = slope;
+        begin(&n, ta, y, legs, &last);
+        net_integrate(&n, ta, t0 + b, y, h_max, acc);
+        ran++;
+    }
+    for (int i = 0; i < 3; i++) {
+        PyObject *f = PyFloat_FromDouble(acc[i]);
+        if (f == NULL) {
+            return NULL;
+        }
+        PyList_SetItem(acc_list, i, f); /* steals f */
+    }
+    return Py_BuildValue("[ddddd](iii)illdi", y[0], y[1], y[2], y[3], y[4], n.kinds[0],
+                         n.kinds[1], n.kinds[2], last, n.events, n.overflows, n.vdc, ran);
+}
+
 PyDoc_STRVAR(settle_doc,
 "settle(motor_k, cfg, kinds, t, y) -> (y, kinds, events)\n\n"
 "Network.begin's projection and _settle: puts y on the constraint of the floating phases and\n"
@@ -1475,6 +1611,7 @@ static PyMethodDef methods[] = {
     {"settle", (PyCFunction)(void (*)(void))mod_settle, METH_FASTCALL, settle_doc},
     {"leg_period", (PyCFunction)(void (*)(void))mod_leg_period, METH_FASTCALL, leg_period_doc},
     {"advance", (PyCFunction)(void (*)(void))mod_advance, METH_FASTCALL, advance_doc},
+    {"period", (PyCFunction)(void (*)(void))mod_period, METH_FASTCALL, period_doc},
     {"duty_windows", (PyCFunction)(void (*)(void))mod_duty_windows, METH_FASTCALL, duty_windows_doc},
     {NULL, NULL, 0, NULL},
 };
@@ -1509,7 +1646,7 @@ PyMODINIT_FUNC PyInit__plantnet(void)
         return NULL;
     }
     /* The kernel's interface version: plant_rt/ckernel.py refuses a build of another one. */
-    if (PyModule_AddIntConstant(mod, "ABI", 2) < 0) {
+    if (PyModule_AddIntConstant(mod, "ABI", 3) < 0) {
         Py_DECREF(mod);
         return NULL;
     }
