@@ -18,5 +18,6 @@ test: bootstrap
 
 clean:
 	$(MAKE) -s -C protocol/c clean
+	$(MAKE) -s -C plant_rt/c clean
 	$(MAKE) -s -C firmware_stub clean
 	rm -rf $(OUT)

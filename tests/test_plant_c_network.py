@@ -127,6 +127,20 @@ def test_default_is_the_c_kernel_unless_pure_python_is_asked():
     assert out == ["False", "True"]
 
 
+def test_without_the_extension_the_plant_runs_python_and_says_why():
+    env = {**os.environ, "HIL_PLANT_C_PATH": str(ROOT / "plant_rt" / "c" / "build" / "absent.so")}
+    env.pop("HIL_PLANT_PURE_PYTHON", None)
+    code = ("from plant_rt import Plant, load_profile, ckernel\n"
+            "p = Plant(load_profile(overrides={'inverter': {'dead_time_s': 2e-6}}))\n"
+            "p.step(duty=(0.2, 0.5, 0.8))\n"
+            "try:\n    p.use_c_kernel(True)\nexcept ImportError as e:\n    print('refused:', e)\n"
+            "print(ckernel.AVAILABLE, p.c_kernel, ckernel.UNAVAILABLE_REASON)")
+    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True,
+                         text=True, check=True).stdout
+    assert out.startswith("refused: ") and "not built" in out
+    assert "\nFalse False " in out
+
+
 @needs_kernel
 @pytest.mark.parametrize("speed", [RATED_RAD_S, 2.0 * RATED_RAD_S])
 def test_pwm_with_dead_time_and_drop_c_equals_python(speed):
