@@ -125,10 +125,12 @@ class Command:
             return GATE_COMMANDS[word]
         if duty is not None:
             try:
-                values = tuple(float(d) for d in duty)
+                a, b, c = duty       # unpacked, not a generator: this runs every PWM period
+                values = (float(a), float(b), float(c))
             except (TypeError, ValueError):
                 raise ValueError(f"duty must be three numbers 0..1, got {duty!r}") from None
-            if len(values) != 3 or not all(0.0 <= d <= 1.0 for d in values):
+            if not (0.0 <= values[0] <= 1.0 and 0.0 <= values[1] <= 1.0
+                    and 0.0 <= values[2] <= 1.0):
                 raise ValueError(f"duty must be three numbers 0..1, got {duty!r}")
             return Command(duty=values)
         return None
