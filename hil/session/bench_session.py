@@ -474,7 +474,7 @@ class BenchSession:
             saw_telemetry = False
             msg_out = None
             first_sent = None
-            recorded = False
+            recorded = recording = False
             try:
                 for attempt in range(sends):
                     if attempt:
@@ -495,9 +495,12 @@ class BenchSession:
                     if not recorded:
                         # The period's record needs nothing from the answer: made while a
                         # board in another process or on a wire computes it (off the critical
-                        # path of stub-pty and real boards), inside the same deadline.
+                        # path of stub-pty and real boards), inside the same deadline. A
+                        # failing log (a full disk) is not the link's failure: `recording`
+                        # lets it through the handler below as it is.
+                        recorded = recording = True
                         recorder.period(k, plant.truth(), sample)
-                        recorded = True
+                        recording = False
                         if answer_timeout > 0.0:
                             wait = deadline - clock()
                             if wait <= 0.0:
@@ -542,6 +545,8 @@ class BenchSession:
                     if gates is not None or duty is not None:
                         break
             except (OSError, ValueError) as exc:  # LinkError is an OSError: the line is gone
+                if recording:
+                    raise
                 if not recorded:
                     recorder.period(k, plant.truth(), sample)
                 self._link_failed(k, exc)
