@@ -1,7 +1,8 @@
 """The live stream's cost to the period loop (issue 17): lockstep periods/s of the in-process
 stub with the full log, without a live server, with one and no viewer, and with a viewer that
-subscribes to every channel and then stops reading (the server's backlog fills and drops),
-that viewer being a process of its own as Foxglove is.
+subscribes to every channel and then stops reading (the kernel's buffers are filled first, so
+the server's backlog overflows and drops throughout), that viewer being a process of its own
+as Foxglove is.
 
 Batches interleave the three configurations so they see the same machine load; the figure is
 the median of each and the ratio to the session without a server, and the stalled viewer's
@@ -43,6 +44,9 @@ async def run(port):
         await ws.send(json.dumps({"op": "subscribe", "subscriptions": [
             {"id": i, "channelId": c["id"]} for i, c in enumerate(channels, start=1)]}))
         print("ready", flush=True)
+        if sys.argv[2] == "read":
+            while True:                  # a viewer that keeps up: takes and drops every message
+                await ws.recv()
         # Never reads again: websockets stops reading its socket once its one-message queue is
         # full, the kernel's buffers fill, and the server's backlog for this client overflows.
         await asyncio.sleep(3600)
@@ -51,10 +55,11 @@ asyncio.run(run(int(sys.argv[1])))
 """
 
 
-def _stalled_viewer(port: int, timeout_s: float = 10.0) -> subprocess.Popen:
-    """A viewer process that subscribes to every channel and then stops reading (until killed)."""
-    proc = subprocess.Popen([sys.executable, "-c", _VIEWER, str(port)], stdout=subprocess.PIPE,
-                            text=True)
+def _stalled_viewer(port: int, timeout_s: float = 10.0, reads: bool = False) -> subprocess.Popen:
+    """A viewer process that subscribes to every channel and then stops reading (until killed),
+    or with `reads` keeps reading and dropping what it gets."""
+    proc = subprocess.Popen([sys.executable, "-c", _VIEWER, str(port), "read" if reads else "stall"],
+                            stdout=subprocess.PIPE, text=True)
     line: list[str] = []
     reader = threading.Thread(target=lambda: line.append(proc.stdout.readline()), daemon=True)
     reader.start()
@@ -72,7 +77,9 @@ def _rate(session: BenchSession, periods: int) -> float:
 
 
 def run(quick: bool = False) -> dict:
-    periods, batches = (5000, 3) if quick else (20000, 5)
+    # Many short batches, interleaved: this VM's speed drifts by 10-30 % over seconds, and a
+    # few long batches put that drift into the ratio (0.87-1.2 from run to run with 5 x 20,000).
+    periods, batches = (2000, 9) if quick else (2000, 41)
     profile = load_bench_profile()
     rates: dict[str, list[float]] = {"no server": [], "server, no viewer": [],
                                      "stalled viewer": []}
@@ -91,7 +98,15 @@ def run(quick: bool = False) -> dict:
                     s.recorder.live = stream
                     if name == "stalled viewer":
                         viewers.append(_stalled_viewer(stream.port))
-                s.run_periods(periods // 4)            # warm-up (and the viewer's buffers fill)
+                        # Stall it for real: a row every period for 20,000 periods (about 5 MB)
+                        # fills the kernel's buffers between server and viewer (4 MB send,
+                        # 128 kB receive here: `ss -tn` shows both full after it), so from the
+                        # first batch on the server's backlog overflows and drops. At 1 kHz the
+                        # same would take 400,000 periods; before it, the viewer is only slow.
+                        every, stream.every = stream.every, 1
+                        s.run_periods(20000)
+                        stream.every = every
+                s.run_periods(periods // 4)            # warm-up
                 sessions[name] = s
             for _ in range(batches):
                 for name, s in sessions.items():
@@ -116,4 +131,44 @@ def run(quick: bool = False) -> dict:
         statistics.median(rates["stalled viewer"]) / statistics.median(rates["server, no viewer"]), 3)
     out["cost_per_period_us_stalled_viewer"] = round(1e6 / out["stalled viewer"]["periods_per_s"]
                                                      - 1e6 / base, 2)
+    out["viewer reading"] = reading_viewer(periods, batches)
     return out
+
+
+def reading_viewer(periods: int, batches: int) -> dict:
+    """What a viewer that keeps up costs (Foxglove showing the run: the server sends every row
+    it is given), against the same server with no client. Its own phase, after the one above:
+    the reading process runs on after a batch until it has drained what was sent, so each of
+    its batches is followed by a pause, and it never shares the machine with the stalled one."""
+    profile = load_bench_profile()
+    rates: dict[str, list[float]] = {"no client": [], "viewer reading": []}
+    with tempfile.TemporaryDirectory() as tmp:
+        sessions, streams, viewer = {}, [], None
+        try:
+            for name in rates:
+                s = BenchSession(profile, SessionConfig(link="stub", log_path=Path(tmp) / f"{name}.mcap"))
+                s.start()
+                s.send_command(enable=True, speed_source="ekf", speed_ref_rpm=3000)
+                stream = LiveStream("127.0.0.1", 0, period_s=profile.control_period_s)
+                streams.append(stream)
+                s.recorder.live = stream
+                if name == "viewer reading":
+                    viewer = _stalled_viewer(stream.port, reads=True)
+                s.run_periods(periods // 4)
+                sessions[name] = s
+            for _ in range(batches):
+                for name, s in sessions.items():
+                    rates[name].append(_rate(s, periods))
+                    if name == "viewer reading":
+                        time.sleep(0.05)
+        finally:
+            if viewer is not None:
+                viewer.kill()
+                viewer.wait(10)
+            for s in sessions.values():
+                s.close()
+            for stream in streams:
+                stream.close()
+    base, reading = statistics.median(rates["no client"]), statistics.median(rates["viewer reading"])
+    return {"periods_per_s": round(reading), "ratio_to_no_client": round(reading / base, 3),
+            "cost_per_period_us": round(1e6 / reading - 1e6 / base, 2)}
