@@ -66,6 +66,56 @@ def plant_only_rate(periods: int, batches: int) -> dict:
     return {"periods_per_s": round(rate), "us_per_period": round(1e6 / rate, 2)}
 
 
+def stub_log_plant_interleaved(periods: int, batches: int) -> dict:
+    """Issue 18's headline trio side by side: `stub`, `stub` with the full log, and the plant
+    alone (sample, truth, step, replaying the stub's switch words), in short batches taken in
+    turn, so that the VM's drift (10-30 % over seconds here) falls on all three alike; medians
+    of each and the ratios from them. (Measured one after the other, as lockstep_rate does for
+    the other links, the log's cost moved from 4 to 11 us between runs.)"""
+    from plant_rt import Plant
+
+    profile = load_profile()
+    with tempfile.TemporaryDirectory() as tmp:
+        plain = BenchSession(profile, SessionConfig(link="stub"))
+        logged = BenchSession(profile, SessionConfig(link="stub", log_path=Path(tmp) / "bench.mcap"))
+        try:
+            for s in (plain, logged):
+                s.start()
+                s.send_command(enable=True, speed_source="ekf", speed_ref_rpm=3000)
+                s.run_periods(4 * periods)          # to 3000 rpm and past the warm-up
+            gates = [int(row[4]) for row in plain.recorder.telemetry_rows[-periods:]]
+            plant = Plant(profile, seed=0)
+
+            def plant_only() -> float:
+                sample, step, truth = plant.sample, plant.step, plant.truth
+                t0 = time.perf_counter()
+                for g in gates:
+                    sample()
+                    truth()
+                    step(g)
+                return len(gates) / (time.perf_counter() - t0)
+
+            def session_rate(s: BenchSession) -> float:
+                t0 = time.perf_counter()
+                s.run_periods(periods)
+                return periods / (time.perf_counter() - t0)
+
+            rates: dict[str, list[float]] = {"stub": [], "stub+log": [], "plant_only": []}
+            for _ in range(batches):
+                rates["stub"].append(session_rate(plain))
+                rates["stub+log"].append(session_rate(logged))
+                rates["plant_only"].append(plant_only())
+        finally:
+            plain.close()
+            logged.close()
+    med = {k: statistics.median(v) for k, v in rates.items()}
+    out = {k: {"periods_per_s": round(v), "us_per_period": round(1e6 / v, 2)} for k, v in med.items()}
+    out["batches"], out["periods_per_batch"] = batches, periods
+    out["log_us_per_period"] = round(1e6 / med["stub+log"] - 1e6 / med["stub"], 2)
+    out["stub+log_vs_plant_only"] = round(med["plant_only"] / med["stub+log"], 2)
+    return out
+
+
 def hil_run_startup(runs: int) -> dict:
     """Wall time of `hil run` on a two-period plan (the shortest a check can read: process
     start, imports, stub load, handshake, the periods, reports), median of `runs`."""
@@ -155,11 +205,12 @@ def run(quick: bool = False) -> dict:
                                                      batches)
             except Exception as exc:  # noqa: BLE001 - a missing back end is reported, not fatal
                 out["lockstep"][key] = {"error": str(exc)}
-    # The floor: the plant alone, and how far the logged in-process session is above it.
+    # The floor: the plant alone, and how far the logged in-process session is above it,
+    # measured side by side with `stub` and `stub` + log (the figures issue 18 asks for).
     out["lockstep"]["plant_only"] = plant_only_rate(periods, batches)
-    if "periods_per_s" in out["lockstep"].get("stub+log", {}):
-        out["lockstep"]["stub+log_vs_plant_only"] = round(
-            out["lockstep"]["plant_only"]["periods_per_s"] / out["lockstep"]["stub+log"]["periods_per_s"], 2)
+    interleaved = stub_log_plant_interleaved(2000, 9 if quick else 31)
+    out["lockstep"]["stub, stub+log, plant_only interleaved"] = interleaved
+    out["lockstep"]["stub+log_vs_plant_only"] = interleaved["stub+log_vs_plant_only"]
     out["hil_run_startup"] = hil_run_startup(3 if quick else 7)
     # TELEMETRY is 8 classic CAN frames, each read a byte at a time by python-can's slcan:
     # the rate a CAN profile gets with telemetry_divider 10 in its controller section.
