@@ -5,7 +5,7 @@ DC-link energy error as a fraction of the energy exchanged, current zero crossin
     python -m bench plant_accuracy            # the four short cases and the 1 s case (minutes)
     python -m bench plant_accuracy --quick    # the four short cases only
 
-The reference and the comparison are tests/test_plant_pwm_reference.py's (scipy solve_ivp,
+The reference and the comparison are bench/_switched_reference.py's (scipy solve_ivp,
 rtol 1e-10, on the circuit written from its equations, not from the plant's code); the tests
 assert the limits (1e-6 of each), this prints the values. It runs whichever plant path is the
 default: the C kernel when it is built (plant_rt.ckernel), else the Python reference.
@@ -16,7 +16,7 @@ from plant_rt import ckernel
 
 
 def run(quick: bool = False) -> dict:
-    from tests.test_plant_pwm_reference import RATED_RAD_S, run as compare
+    from bench._switched_reference import RATED_RAD_S, run as compare
 
     cases = {
         "dead_time_2us_rated": (RATED_RAD_S, 1200, 1, 2e-6, 0.0),
