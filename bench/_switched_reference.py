@@ -25,8 +25,6 @@ from __future__ import annotations
 import math
 import random
 
-from scipy.integrate import solve_ivp
-
 from plant_rt import TRUTH_FIELDS, Plant, load_profile
 
 F = {name: i for i, name in enumerate(TRUTH_FIELDS)}
@@ -101,6 +99,10 @@ def leg_switches(duty: float, T: float, td: float):
 
 def reference_period(circ: SwitchedCircuit, s, duty, T: float, td: float, modes):
     """One period from state s; modes carries diode / floating states across intervals."""
+    # scipy is a test and benchmark dependency, not a runtime one (requirements-runtime.lock):
+    # imported where it is used, so the module imports with the runtime set
+    from scipy.integrate import solve_ivp
+
     legs = [leg_switches(d, T, td) for d in duty]
     times = sorted({t for leg in legs for seg in leg for t in seg[:2]})
     for t0, t1 in zip(times, times[1:]):
