@@ -692,6 +692,60 @@ static void advance_general(const cfg_t *m, double *st, double va, double vb, do
     st[3] = th;
 }
 
+/* One RK4 step of MotorModel's Ld = Lq form at constant (va, vb) with the load torque at the
+ * step's start, middle and end (tl1, tl2, tl4); ril = R/L, rk = R psim/L, kti = kt psim/L.
+ * advance_spm and advance_pieces both take it: each keeps its own load-time bookkeeping,
+ * as the Python they mirror does. */
+static inline void rk4_spm_step(double p, double ril, double rk, double kti, double ij, double bw,
+                                double va, double vb, double h, double tl1, double tl2, double tl4,
+                                double *pa_io, double *pb_io, double *w_io, double *th_io)
+{
+    double pa = *pa_io, pb = *pb_io, w = *w_io, th = *th_io;
+    double h2 = 0.5 * h;
+    double h6 = h / 6.0;
+    double e = p * th;
+    double c = cos(e);
+    double s = sin(e);
+    double d1a = va - ril * pa + rk * c;
+    double d1b = vb - ril * pb + rk * s;
+    double d1w = (kti * (c * pb - s * pa) - bw * w - tl1) * ij;
+    double xa = pa + h2 * d1a;
+    double xb = pb + h2 * d1b;
+    double w2 = w + h2 * d1w;
+    e = p * (th + h2 * w);
+    c = cos(e);
+    s = sin(e);
+    double d2a = va - ril * xa + rk * c;
+    double d2b = vb - ril * xb + rk * s;
+    double d2w = (kti * (c * xb - s * xa) - bw * w2 - tl2) * ij;
+    xa = pa + h2 * d2a;
+    xb = pb + h2 * d2b;
+    double w3 = w + h2 * d2w;
+    e = p * (th + h2 * w2);
+    c = cos(e);
+    s = sin(e);
+    double d3a = va - ril * xa + rk * c;
+    double d3b = vb - ril * xb + rk * s;
+    double d3w = (kti * (c * xb - s * xa) - bw * w3 - tl2) * ij;
+    xa = pa + h * d3a;
+    xb = pb + h * d3b;
+    double w4 = w + h * d3w;
+    e = p * (th + h * w3);
+    c = cos(e);
+    s = sin(e);
+    double d4a = va - ril * xa + rk * c;
+    double d4b = vb - ril * xb + rk * s;
+    double d4w = (kti * (c * xb - s * xa) - bw * w4 - tl4) * ij;
+    pa += h6 * (d1a + 2.0 * (d2a + d3a) + d4a);
+    pb += h6 * (d1b + 2.0 * (d2b + d3b) + d4b);
+    th += h6 * (w + 2.0 * (w2 + w3) + w4);
+    w += h6 * (d1w + 2.0 * (d2w + d3w) + d4w);
+    *pa_io = pa;
+    *pb_io = pb;
+    *w_io = w;
+    *th_io = th;
+}
+
 /* MotorModel.advance's Ld = Lq form (its own time bookkeeping: t accumulates h). */
 static void advance_spm(const cfg_t *m, double *st, double va, double vb, double h, long n,
                         double tl0, double tl_slope, double bw)
@@ -699,7 +753,6 @@ static void advance_spm(const cfg_t *m, double *st, double va, double vb, double
     double p = m->p, r = m->r, psim = m->psim, ild = m->ild, ij = m->ij, kt = m->kt;
     double pa = st[0], pb = st[1], w = st[2], th = st[3];
     double h2 = 0.5 * h;
-    double h6 = h / 6.0;
     double t = 0.0;
     double ril = r * ild;
     double rk = r * psim * ild;
@@ -708,43 +761,7 @@ static void advance_spm(const cfg_t *m, double *st, double va, double vb, double
         double tl1 = tl0 + tl_slope * t;
         double tl2 = tl1 + tl_slope * h2;
         double tl4 = tl1 + tl_slope * h;
-        double e = p * th;
-        double c = cos(e);
-        double s = sin(e);
-        double d1a = va - ril * pa + rk * c;
-        double d1b = vb - ril * pb + rk * s;
-        double d1w = (kti * (c * pb - s * pa) - bw * w - tl1) * ij;
-        double xa = pa + h2 * d1a;
-        double xb = pb + h2 * d1b;
-        double w2 = w + h2 * d1w;
-        e = p * (th + h2 * w);
-        c = cos(e);
-        s = sin(e);
-        double d2a = va - ril * xa + rk * c;
-        double d2b = vb - ril * xb + rk * s;
-        double d2w = (kti * (c * xb - s * xa) - bw * w2 - tl2) * ij;
-        xa = pa + h2 * d2a;
-        xb = pb + h2 * d2b;
-        double w3 = w + h2 * d2w;
-        e = p * (th + h2 * w2);
-        c = cos(e);
-        s = sin(e);
-        double d3a = va - ril * xa + rk * c;
-        double d3b = vb - ril * xb + rk * s;
-        double d3w = (kti * (c * xb - s * xa) - bw * w3 - tl2) * ij;
-        xa = pa + h * d3a;
-        xb = pb + h * d3b;
-        double w4 = w + h * d3w;
-        e = p * (th + h * w3);
-        c = cos(e);
-        s = sin(e);
-        double d4a = va - ril * xa + rk * c;
-        double d4b = vb - ril * xb + rk * s;
-        double d4w = (kti * (c * xb - s * xa) - bw * w4 - tl4) * ij;
-        pa += h6 * (d1a + 2.0 * (d2a + d3a) + d4a);
-        pb += h6 * (d1b + 2.0 * (d2b + d3b) + d4b);
-        th += h6 * (w + 2.0 * (w2 + w3) + w4);
-        w += h6 * (d1w + 2.0 * (d2w + d3w) + d4w);
+        rk4_spm_step(p, ril, rk, kti, ij, bw, va, vb, h, tl1, tl2, tl4, &pa, &pb, &w, &th);
         t += h;
     }
     st[0] = pa;
@@ -782,48 +799,11 @@ static double advance_pieces(const cfg_t *m, int spm, double *st, const piece_t 
         } else {
             double h = length / (double)n;
             double h2 = 0.5 * h;
-            double h6 = h / 6.0;
             for (long i = 0; i < n; i++) {
                 double tl1 = tl0 + tl_slope * (t + (double)i * h);
                 double tl2 = tl1 + tl_slope * h2;
                 double tl4 = tl1 + tl_slope * h;
-                double e = p * th;
-                double c = cos(e);
-                double s = sin(e);
-                double d1a = va - ril * pa + rk * c;
-                double d1b = vb - ril * pb + rk * s;
-                double d1w = (kti * (c * pb - s * pa) - bw * w - tl1) * ij;
-                double xa = pa + h2 * d1a;
-                double xb = pb + h2 * d1b;
-                double w2 = w + h2 * d1w;
-                e = p * (th + h2 * w);
-                c = cos(e);
-                s = sin(e);
-                double d2a = va - ril * xa + rk * c;
-                double d2b = vb - ril * xb + rk * s;
-                double d2w = (kti * (c * xb - s * xa) - bw * w2 - tl2) * ij;
-                xa = pa + h2 * d2a;
-                xb = pb + h2 * d2b;
-                double w3 = w + h2 * d2w;
-                e = p * (th + h2 * w2);
-                c = cos(e);
-                s = sin(e);
-                double d3a = va - ril * xa + rk * c;
-                double d3b = vb - ril * xb + rk * s;
-                double d3w = (kti * (c * xb - s * xa) - bw * w3 - tl2) * ij;
-                xa = pa + h * d3a;
-                xb = pb + h * d3b;
-                double w4 = w + h * d3w;
-                e = p * (th + h * w3);
-                c = cos(e);
-                s = sin(e);
-                double d4a = va - ril * xa + rk * c;
-                double d4b = vb - ril * xb + rk * s;
-                double d4w = (kti * (c * xb - s * xa) - bw * w4 - tl4) * ij;
-                pa += h6 * (d1a + 2.0 * (d2a + d3a) + d4a);
-                pb += h6 * (d1b + 2.0 * (d2b + d3b) + d4b);
-                th += h6 * (w + 2.0 * (w2 + w3) + w4);
-                w += h6 * (d1w + 2.0 * (d2w + d3w) + d4w);
+                rk4_spm_step(p, ril, rk, kti, ij, bw, va, vb, h, tl1, tl2, tl4, &pa, &pb, &w, &th);
             }
         }
         double ga = pieces[k].ga, gb = pieces[k].gb;
