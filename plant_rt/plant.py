@@ -373,14 +373,8 @@ class Plant:
             if done is False:
                 return False
             if done is not None:        # None: more edges than the kernel holds (Python's turn)
-                self._pa, self._pb, self._w, self._th, ua_int, ub_int, q, h = done
-                self._u_int = (ua_int, ub_int)
-                self._idc_int = q
-                self._zero_current = False
-                self._vdc = vdc
-                if self._net_dirty:
-                    self.network.set_driven(_LEG_STATES[_LEG_WORDS[h]])
-                    self._net_dirty = False
+                pa, pb, w, th, ua_int, ub_int, q, h = done
+                self._end_leg_period(pa, pb, w, th, ua_int, ub_int, q, h, vdc)
                 return True
         y_pa, y_pb, y_w, y_th = self._pa, self._pb, self._w, self._th
         need = []                       # legs whose current sign matters
@@ -464,8 +458,14 @@ class Plant:
         if need and not self._signs_hold(need, signs, cur0, pieces, edges, pa, pb, w, th,
                                          y_w, ud, vdc, abs(v0) + abs(slope) * T):
             return False
-        self._pa, self._pb, self._w = pa, pb, w
-        self._th = th
+        self._end_leg_period(pa, pb, w, th, ua_int, ub_int, q, h, vdc)
+        return True
+
+    def _end_leg_period(self, pa: float, pb: float, w: float, th: float, ua_int: float,
+                        ub_int: float, q: float, h: int, vdc: float) -> None:
+        """A PWM period done by _leg_period (in C or in Python): its end state, the volt-seconds
+        and DC-link charge it integrated, and the network's legs as the last word `h` left them."""
+        self._pa, self._pb, self._w, self._th = pa, pb, w, th
         self._u_int = (ua_int, ub_int)
         self._idc_int = q
         self._zero_current = False
@@ -473,7 +473,6 @@ class Plant:
         if self._net_dirty:
             self.network.set_driven(_LEG_STATES[_LEG_WORDS[h]])
             self._net_dirty = False
-        return True
 
     def _signs_hold(self, need, signs, cur0, pieces, edges, pa, pb, w, th, w0, ud, vdc,
                     load_max) -> bool:
