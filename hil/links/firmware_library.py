@@ -216,17 +216,11 @@ class FirmwareLibraryLink(_FirmwareLibrary):
 
     def exchange_target(self) -> tuple[int, int] | None:
         """(address of hil_fw_exchange, instance) for a caller that drives the firmware from C
-        (protocol.ccodec's exchange_sample), or None once closed. The bytes such a caller
-        exchanges bypass this link's counters; it counts them itself. Bytes the firmware
-        answered earlier and nobody read yet are the caller's to take first (read_bytes)."""
+        (protocol.ccodec's exchange_sample), or None once closed; sample_exchange() builds the
+        per-period function on it that also keeps this link's counters."""
         if self._closed:
             return None
         return ctypes.cast(self._lib.hil_fw_exchange, ctypes.c_void_p).value, self._fw
-
-    def count_exchange(self, bytes_out: int, frames_out: int, bytes_in: int) -> None:
-        self.tx_bytes += bytes_out
-        self.tx_frames += frames_out
-        self.rx_bytes += bytes_in
 
     def sample_exchange(self, exchange_sample, encoder, decoder, cap_out: bytearray,
                         cap_in: bytearray, frames: dict[str, int], inbox, take_earlier):

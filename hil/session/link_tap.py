@@ -76,7 +76,6 @@ class LinkTap:
         self._decoder = codec.StreamDecoder()
         # decoded messages not taken yet; the session's period loop pops it directly
         self.inbox: deque = deque()
-        self._inbox = self.inbox
         self._partial = bytearray()
         self._rng = {d: random.Random(f"{seed}:{d}") for d in DIRECTIONS}
         self._held: list[tuple[int, str, bytes]] = []
@@ -185,7 +184,7 @@ class LinkTap:
         if direction == "out":
             self.link.send_bytes(frame)
         else:
-            self._inbox.extend(self._decoder.feed(frame))
+            self.inbox.extend(self._decoder.feed(frame))
 
     def _pass(self, direction: str, frame: bytes) -> None:
         if self.faults:
@@ -220,7 +219,7 @@ class LinkTap:
                 or self.link.exchange_target() is None):
             return None
         return make(ccodec.exchange_sample, self._encoder, self._decoder, self.captured["out"],
-                    self.captured["in"], self.captured_frames, self._inbox, self._take_in)
+                    self.captured["in"], self.captured_frames, self.inbox, self._take_in)
 
     @property
     def fast_ready(self) -> bool:
@@ -241,7 +240,7 @@ class LinkTap:
             # decoded in one call
             self.captured["in"] += complete
             self.captured_frames["in"] += complete.count(0)
-            self._inbox.extend(self._decoder.feed(complete))
+            self.inbox.extend(self._decoder.feed(complete))
             return
         start = 0
         while start < len(complete):
@@ -250,7 +249,7 @@ class LinkTap:
             start = stop
 
     def recv(self, timeout_s: float | None = 0.0):
-        inbox = self._inbox
+        inbox = self.inbox
         if inbox:
             return inbox.popleft()
         deadline = None if timeout_s is None else time.monotonic() + timeout_s
