@@ -42,6 +42,20 @@ def lockstep_rate(link: str, log: bool, periods: int, batches: int,
             "cpu_dma_latency": hold}
 
 
+def _plant_replay(plant, gates: list[int]):
+    """A function that drives `plant` as the session does (sample, truth, step) through the
+    switch words `gates` once and returns the periods/s it took."""
+    def replay() -> float:
+        sample, step, truth = plant.sample, plant.step, plant.truth
+        t0 = time.perf_counter()
+        for g in gates:
+            sample()
+            truth()
+            step(g)
+        return len(gates) / (time.perf_counter() - t0)
+    return replay
+
+
 def plant_only_rate(periods: int, batches: int) -> dict:
     """The plant alone, as the session drives it (sample, step, truth per period), replaying
     the switch words the stub chose in a 3000 rpm EKF run: the floor under any lockstep rate."""
@@ -52,17 +66,8 @@ def plant_only_rate(periods: int, batches: int) -> dict:
         session.send_command(enable=True, speed_source="ekf", speed_ref_rpm=3000)
         session.run_periods(periods)
         gates = [int(row[4]) for row in session.recorder.telemetry_rows[-periods:]]
-    plant = Plant(profile, seed=0)
-    rates = []
-    for _ in range(batches):
-        sample, step, truth = plant.sample, plant.step, plant.truth
-        t0 = time.perf_counter()
-        for g in gates:
-            sample()
-            truth()
-            step(g)
-        rates.append(len(gates) / (time.perf_counter() - t0))
-    rate = statistics.median(rates)
+    replay = _plant_replay(Plant(profile, seed=0), gates)
+    rate = statistics.median(replay() for _ in range(batches))
     return {"periods_per_s": round(rate), "us_per_period": round(1e6 / rate, 2)}
 
 
@@ -84,16 +89,7 @@ def stub_log_plant_interleaved(periods: int, batches: int) -> dict:
                 s.send_command(enable=True, speed_source="ekf", speed_ref_rpm=3000)
                 s.run_periods(4 * periods)          # to 3000 rpm and past the warm-up
             gates = [int(row[4]) for row in plain.recorder.telemetry_rows[-periods:]]
-            plant = Plant(profile, seed=0)
-
-            def plant_only() -> float:
-                sample, step, truth = plant.sample, plant.step, plant.truth
-                t0 = time.perf_counter()
-                for g in gates:
-                    sample()
-                    truth()
-                    step(g)
-                return len(gates) / (time.perf_counter() - t0)
+            plant_only = _plant_replay(Plant(profile, seed=0), gates)
 
             def session_rate(s: BenchSession) -> float:
                 t0 = time.perf_counter()
