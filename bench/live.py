@@ -70,6 +70,24 @@ def _stalled_viewer(port: int, timeout_s: float = 10.0, reads: bool = False) -> 
     return proc
 
 
+def _logged_session(profile, log_path: Path) -> BenchSession:
+    """The in-process stub with the full log, driving the plant at 3000 rpm on the EKF."""
+    s = BenchSession(profile, SessionConfig(link="stub", log_path=log_path))
+    s.start()
+    s.send_command(enable=True, speed_source="ekf", speed_ref_rpm=3000)
+    return s
+
+
+def _close_all(viewers, sessions, streams) -> None:
+    for viewer in viewers:        # a stalled client has no clean close to wait for
+        viewer.kill()
+        viewer.wait(10)
+    for s in sessions:
+        s.close()
+    for stream in streams:
+        stream.close()
+
+
 def _rate(session: BenchSession, periods: int) -> float:
     t0 = time.perf_counter()
     session.run_periods(periods)
@@ -89,9 +107,7 @@ def run(quick: bool = False) -> dict:
         viewers: list[subprocess.Popen] = []
         try:
             for name in rates:
-                s = BenchSession(profile, SessionConfig(link="stub", log_path=Path(tmp) / f"{len(sessions)}.mcap"))
-                s.start()
-                s.send_command(enable=True, speed_source="ekf", speed_ref_rpm=3000)
+                s = _logged_session(profile, Path(tmp) / f"{len(sessions)}.mcap")
                 if name != "no server":
                     stream = LiveStream("127.0.0.1", 0, period_s=profile.control_period_s)
                     streams.append(stream)
@@ -112,13 +128,7 @@ def run(quick: bool = False) -> dict:
                 for name, s in sessions.items():
                     rates[name].append(_rate(s, periods))
         finally:
-            for viewer in viewers:        # a stalled client has no clean close to wait for
-                viewer.kill()
-                viewer.wait(10)
-            for s in sessions.values():
-                s.close()
-            for stream in streams:
-                stream.close()
+            _close_all(viewers, sessions.values(), streams)
     base = statistics.median(rates["no server"])
     out = {"periods_per_batch": periods, "batches": batches}
     for name, values in rates.items():
@@ -146,9 +156,7 @@ def reading_viewer(periods: int, batches: int) -> dict:
         sessions, streams, viewer = {}, [], None
         try:
             for name in rates:
-                s = BenchSession(profile, SessionConfig(link="stub", log_path=Path(tmp) / f"{name}.mcap"))
-                s.start()
-                s.send_command(enable=True, speed_source="ekf", speed_ref_rpm=3000)
+                s = _logged_session(profile, Path(tmp) / f"{name}.mcap")
                 stream = LiveStream("127.0.0.1", 0, period_s=profile.control_period_s)
                 streams.append(stream)
                 s.recorder.live = stream
@@ -162,13 +170,7 @@ def reading_viewer(periods: int, batches: int) -> dict:
                     if name == "viewer reading":
                         time.sleep(0.05)
         finally:
-            if viewer is not None:
-                viewer.kill()
-                viewer.wait(10)
-            for s in sessions.values():
-                s.close()
-            for stream in streams:
-                stream.close()
+            _close_all([viewer] if viewer is not None else [], sessions.values(), streams)
     base, reading = statistics.median(rates["no client"]), statistics.median(rates["viewer reading"])
     return {"periods_per_s": round(reading), "ratio_to_no_client": round(reading / base, 3),
             "cost_per_period_us": round(1e6 / reading - 1e6 / base, 2)}
