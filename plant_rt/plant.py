@@ -236,10 +236,18 @@ class Plant:
                 va, vb, ga, gb, legs = vec
                 pa0, pb0 = self._pa, self._pb
                 n = self._n_fast
-                pa, pb, self._w, th_end = self.motor.advance(
-                    pa0, pb0, self._w, th, va, vb, T / n, n,
-                    self._load_v0 + self._load_slope * (t0 - self._load_t), self._load_slope,
-                    self._bw)
+                kernel = self._ckernel
+                motor = self.motor
+                if kernel is not None:
+                    pa, pb, self._w, th_end = kernel.advance(
+                        motor._k, motor.spm, pa0, pb0, self._w, th, va, vb, T / n, n,
+                        self._load_v0 + self._load_slope * (t0 - self._load_t), self._load_slope,
+                        self._bw)
+                else:
+                    pa, pb, self._w, th_end = motor.advance(
+                        pa0, pb0, self._w, th, va, vb, T / n, n,
+                        self._load_v0 + self._load_slope * (t0 - self._load_t), self._load_slope,
+                        self._bw)
                 self._pa = pa
                 self._pb = pb
                 self._u_int = (va * T, vb * T)
