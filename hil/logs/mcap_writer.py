@@ -20,12 +20,13 @@ one thread (the session's) writes.
 """
 from __future__ import annotations
 
-import itertools
 import json
 import math
 import os
 import struct
+import sys
 import zlib
+from array import array
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -200,6 +201,20 @@ class _OpenChunk:
 _FIXED_RECORD_MAX = 64 * 1024
 
 
+def _new_index() -> array:
+    """A channel's entries in the open chunk's MessageIndex: log time and offset, interleaved
+    as unsigned 64-bit integers, the record's own layout, so one tobytes() writes them (a list
+    of (time, offset) tuples cost a struct.pack argument per integer)."""
+    return array("Q")
+
+
+def _little_endian(index: array) -> bytes:
+    if sys.byteorder == "big":
+        index = array("Q", index)
+        index.byteswap()
+    return index.tobytes()
+
+
 class FixedChannel:
     """A protobuf channel whose every message has the same fixed-width layout."""
 
@@ -231,7 +246,7 @@ class FixedChannel:
         self._chunk = log._open
         # pack_into(buffer, offset, opcode, length, channel, sequence, log time, publish time, tag, value, ...)
         self._args = [self._chunk.buf, 0, Opcode.MESSAGE, self.record_size - 9, channel_id, 0, 0, 0] + tail
-        self._index: list[tuple[int, int]] = []  # (log time, offset in chunk) for the MessageIndex
+        self._index = _new_index()
         # The same record as a numpy structured type, for write_many: a batch of messages is
         # filled column by column and copied into the chunk in one go.
         names, formats, offsets = ["op", "length", "channel", "seq", "log_time", "publish_time"], \
@@ -302,7 +317,10 @@ class FixedChannel:
             end = pos + take * size
             with memoryview(chunk.buf) as view:
                 view[pos:end] = raw[done * size:(done + take) * size]
-            self._index.extend(zip(times[done:done + take].tolist(), range(pos, end, size)))
+            pairs = np.empty((take, 2), dtype=np.uint64)
+            pairs[:, 0] = times[done:done + take]
+            pairs[:, 1] = np.arange(pos, end, size, dtype=np.uint64)
+            self._index.frombytes(pairs.tobytes())
             chunk.fill = end
             done += take
             if end >= chunk.limit:
@@ -335,7 +353,9 @@ class FixedChannel:
             raise ValueError(self._bad_values(values, exc)) from None
         end = pos + self.record_size
         chunk.fill = end
-        self._index.append((log_time_ns, pos))
+        index = self._index
+        index.append(log_time_ns)
+        index.append(pos)
         if end >= chunk.limit:
             self._log._finish_chunk()
 
@@ -354,7 +374,7 @@ class _VariableChannel:
         self.topic = topic
         self.channel_id = channel_id
         self._chunk = log._open
-        self._index: list[tuple[int, int]] = []
+        self._index = _new_index()
 
     def _append(self, log_time_ns: int, payload: bytes) -> None:
         chunk = self._chunk
@@ -364,7 +384,9 @@ class _VariableChannel:
         chunk.buf[pos:end] = _MESSAGE_PREFIX_STRUCT.pack(
             Opcode.MESSAGE, end - pos - 9, self.channel_id, 0, log_time_ns, log_time_ns) + payload
         chunk.fill = end
-        self._index.append((log_time_ns, pos))
+        index = self._index
+        index.append(log_time_ns)
+        index.append(pos)
         if end >= chunk.limit:
             self._log._finish_chunk()
 
@@ -641,8 +663,9 @@ class McapLog:
         if not fill:
             return
         active = [c for c in self._channels if c._index]
-        start = min(min(c._index)[0] for c in active)
-        end = max(max(c._index)[0] for c in active)
+        times = [np.frombuffer(c._index, dtype=np.uint64)[0::2] for c in active]
+        start = int(min(t.min() for t in times))
+        end = int(max(t.max() for t in times))
         with memoryview(chunk.buf) as whole, whole[:fill] as raw:
             data = self._compress(raw) if self._compress else bytes(raw)
             raw_crc = zlib.crc32(raw)
@@ -657,14 +680,14 @@ class McapLog:
         index_pos = chunk_start + chunk_length
         for c in active:
             idx = c._index
-            n = len(idx)
+            n = len(idx) // 2
             offsets[c.channel_id] = index_pos
             record = (_RECORD_HEAD.pack(Opcode.MESSAGE_INDEX, 6 + 16 * n)
-                      + struct.pack(f"<HI{2 * n}Q", c.channel_id, 16 * n, *itertools.chain.from_iterable(idx)))
+                      + struct.pack("<HI", c.channel_id, 16 * n) + _little_endian(idx))
             parts.append(record)
             index_pos += len(record)
             self._message_counts[c.channel_id] = self._message_counts.get(c.channel_id, 0) + n
-            idx.clear()
+            c._index = _new_index()
         chunk.fill = 0
         self._write(b"".join(parts))
         self._chunk_indexes.append(ChunkIndex(
