@@ -178,6 +178,33 @@ def test_viewer_parameters_go_through_the_modbus_mailbox_and_bad_ones_are_refuse
         stream.close()
 
 
+def test_viewer_values_that_are_not_finite_or_of_the_wrong_kind_are_refused_by_name():
+    """JSON lets a viewer send NaN, Infinity and null where a number is due, and 1.5 where a
+    bit mask is: none of them may reach the mailbox (a NaN speed reference would be written
+    to the board, a null 'enable' would read as false)."""
+    from hil.live.stream import LiveStream
+    from hil.ports.modbus import ControlMailbox
+
+    stream = LiveStream("127.0.0.1", 0, period_s=50e-6)
+    try:
+        mailbox = ControlMailbox(speed_ref_rpm=1500, run=True)
+        stream.attach_mailbox(mailbox)
+        for bad in (b'{"speed_ref_rpm": NaN}', b'{"load_torque_nm": Infinity}',
+                    b'{"speed_ref_rpm": -Infinity}', b'{"enable": null}', b'{"enable": 2}',
+                    b'{"fault_bits": 1.5}', b'{"fault_bits": true}', b'{"speed_ref_rpm": true}'):
+            stream._command(bad)
+        errors = stream.take_errors()
+        assert len(errors) == 8 and stream.commands_taken == 0, errors
+        for error, key in zip(errors, ("speed_ref_rpm", "load_torque_nm", "speed_ref_rpm", "enable",
+                                       "enable", "fault_bits", "fault_bits", "speed_ref_rpm")):
+            assert f"'{key}'" in error
+        assert mailbox.take_requests() is None                     # nothing was requested
+        stream._command(b'{"speed_ref_rpm": 2000, "enable": true, "fault_bits": 3}')
+        assert stream.take_errors() == [] and stream.commands_taken == 1
+    finally:
+        stream.close()
+
+
 def test_hil_run_hands_every_nth_period_to_the_live_stream():
     """`hil run --live` gives the runner a LiveStream; the recorder hands it every `every`-th
     period's truth and telemetry (here a stand-in that counts, 1 kHz at 50 us = every 20th)."""

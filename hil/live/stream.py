@@ -20,6 +20,7 @@ The server binds to 127.0.0.1 unless another host is given.
 from __future__ import annotations
 
 import json
+import math
 import struct
 import threading
 
@@ -61,6 +62,25 @@ def payload_struct(fields: list[tuple[str, str]]) -> tuple[struct.Struct, tuple[
         fmt += ("B" if len(tag) == 1 else "H") + code
         tags.append(int.from_bytes(tag, "little"))
     return struct.Struct(fmt), tuple(tags)
+
+
+def _command_value(key: str, kind: type, value):
+    """A /cmd value as its field takes it, or ValueError naming the key. JSON as Python parses
+    it allows NaN, Infinity and null, and a bool is an int: each is refused where it does not
+    belong rather than turned into something the board would act on."""
+    if kind is bool:
+        if type(value) is bool or (type(value) is int and value in (0, 1)):
+            return bool(value)
+        raise ValueError(f"'{key}': expected true or false, got {value!r}")
+    if type(value) not in (int, float):
+        raise ValueError(f"'{key}': expected a number, got {value!r}")
+    if not math.isfinite(value):
+        raise ValueError(f"'{key}': expected a finite number, got {value!r}")
+    if kind is int:
+        if value != int(value):
+            raise ValueError(f"'{key}': expected a whole number, got {value!r}")
+        return int(value)
+    return float(value)
 
 
 class _FixedTopic:
@@ -200,14 +220,12 @@ class LiveStream:
                 if key not in COMMAND_KEYS:
                     raise ValueError(f"unknown key '{key}' (known: {', '.join(COMMAND_KEYS)})")
                 kind, field = COMMAND_KEYS[key]
-                if kind is not str and isinstance(value, (str, list, dict)):
-                    raise ValueError(f"'{key}': expected a number, got {value!r}")
                 if field is None:
                     if value not in PACES:
                         raise ValueError(f"'pace': expected one of {', '.join(PACES)}, got {value!r}")
                     pace = value
                 else:
-                    request[field] = kind(value)
+                    request[field] = _command_value(key, kind, value)
             if request and self._mailbox is None:
                 raise ValueError("this run takes no parameters from viewers (hil serve does)")
             if request and not self._mailbox.request(**request):
