@@ -11,13 +11,13 @@ mean 'speed_rpm'?").
 from __future__ import annotations
 
 import dataclasses
-import difflib
 import typing
-from typing import Any, Iterable, Mapping
-
-import jsonschema
+from typing import TYPE_CHECKING, Any, Iterable, Mapping
 
 from configfile.source import ConfigError, KeyPath, YamlDocument
+
+if TYPE_CHECKING:
+    import jsonschema
 
 NUMBER = {"type": "number"}
 POSITIVE = {"type": "number", "exclusiveMinimum": 0}
@@ -95,7 +95,12 @@ class SchemaChecker:
         return self.doc.error(path, message)
 
     def check(self, schema: dict, value: Any, path: KeyPath = ()) -> None:
-        errors = list(jsonschema.Draft202012Validator(schema).iter_errors(value))
+        # Imported at the first check, not with this module: the schemas above are plain data
+        # that plans, profiles and the CLI build at import, and jsonschema's own import
+        # (referencing, attrs, its format checkers, the meta-schemas) is ~0.1 s.
+        from jsonschema import Draft202012Validator
+
+        errors = list(Draft202012Validator(schema).iter_errors(value))
         if not errors:
             return
 
@@ -113,6 +118,8 @@ class SchemaChecker:
             allowed = list(e.schema.get("properties", {}))
             extra = [k for k in inst if k not in allowed]
             key = extra[0] if extra else None
+            import difflib
+
             close = difflib.get_close_matches(str(key), allowed, n=1, cutoff=0.75) if key else []
             expected = (f"; did you mean '{close[0]}'?" if close else
                         f"; expected one of: {', '.join(allowed)}" if allowed else "")
