@@ -43,9 +43,18 @@ import statistics
 import struct
 import tempfile
 import time
+from operator import attrgetter
 from types import SimpleNamespace
 
 import numpy as np
+
+from protocol.messages import Telemetry
+
+#: A TELEMETRY's values in its row's order (period first), as the per-message paths log them.
+_fields = attrgetter("period", "sector", "speed_source", "state", "gates", "speed_feedback_rad_s",
+                     "speed_encoder_rad_s", "speed_raw_rad_s", "speed_lpf_rad_s", "speed_ekf_rad_s",
+                     "flux_angle_rad", "ekf_angle_rad", "flux_mag_wb", "torque_est_nm",
+                     "torque_ref_nm", "rotor_pos_conv_rad", "rotor_pos_ekf_rad")
 
 VARIANTS = (("lz4", 64 * 1024), ("lz4", 1024 * 1024), ("zstd", 64 * 1024), ("none", 64 * 1024))
 
@@ -67,11 +76,9 @@ def _session_rows(periods: int) -> dict:
         rec.frames = keep
         s.send_command(enable=True, speed_source="encoder", speed_ref_rpm=1500)
         s.run_periods(periods)
-        telemetry_fields = ("period", "sector", "speed_source", "state", "gates", "speed_feedback_rad_s",
-                            "speed_encoder_rad_s", "speed_raw_rad_s", "speed_lpf_rad_s", "speed_ekf_rad_s",
-                            "flux_angle_rad", "ekf_angle_rad", "flux_mag_wb", "torque_est_nm",
-                            "torque_ref_nm", "rotor_pos_conv_rad", "rotor_pos_ekf_rad")
-        telemetry = [SimpleNamespace(**dict(zip(telemetry_fields, row))) for row in rec.telemetry_rows]
+        # the messages as the session has them (the codec's Telemetry, which the recorder
+        # takes in C) and the truth as the plant gives it (tuples of floats)
+        telemetry = [Telemetry(*[int(v) for v in row[:5]], *row[5:].tolist()) for row in rec.telemetry_rows]
         return {"periods": list(rec.periods), "truth": list(rec.truth_rows),
                 "sensors": [SimpleNamespace(adc_i1=a, adc_i2=b, adc_vdc=c, encoder=d, status=e)
                             for a, b, c, d, e in rec.sensor_rows],
@@ -123,7 +130,7 @@ def _recorder_run(path: str | None, rows: dict, compression: str = "lz4", chunk_
             m = telemetry.get(k)
             if m is not None:
                 tele(m)
-                te(t, *vars(m).values())
+                te(t, *_fields(m))
     else:
         for i, k in enumerate(periods):
             if k in frames:
@@ -221,7 +228,7 @@ def _sdk_writer_run(path: str, rows: dict) -> float:
         m = telemetry.get(k)
         if m is not None:
             tele(m)
-            tele_ch.log(t, tuple(vars(m).values()))
+            tele_ch.log(t, _fields(m))
     writer.close()
     return time.perf_counter() - t_start
 

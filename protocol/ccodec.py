@@ -32,7 +32,7 @@ from protocol.codec import (  # noqa: F401 - re-exported: the API of protocol.co
 from protocol.messages import MESSAGE_CLASSES
 
 BUILD_DIR = Path(__file__).resolve().parent / "c" / "build"
-_API = ("FrameEncoder", "StreamDecoder", "encode_frame", "crc16", "exchange_sample")
+_API = ("FrameEncoder", "StreamDecoder", "encode_frame", "crc16", "exchange_sample", "fields_into")
 
 
 def extension_path() -> Path:
@@ -74,6 +74,7 @@ else:
     encode_frame = _ext.encode_frame
     crc16 = _ext.crc16
     exchange_sample = _ext.exchange_sample
+    fields_into = _ext.fields_into
 
 
 def __getattr__(name: str):

@@ -1,7 +1,8 @@
 """Keeps every period's plant truth, sensor values, telemetry and commands.
 
-In memory as plain lists (an append costs tens of nanoseconds) for the
-checks at the end of a run, and in the MCAP log in batches: every
+In memory as plain lists (an append costs tens of nanoseconds; a TELEMETRY is kept as the
+message itself and its rows are made a batch at a time by the C codec, hil/logs/columns.py)
+for the checks at the end of a run, and in the MCAP log in batches: every
 `LOG_BATCH_PERIODS` periods the new rows go to the log at once
 (`FixedChannel.write_many`, numpy columns into the open chunk) instead of one
 Python call per message (cost per period: `python -m bench mcap_logging`). The log's crash bound grows by the
@@ -13,11 +14,13 @@ board computed from that sample.
 """
 from __future__ import annotations
 
+import math
 from itertools import chain
 
 import numpy as np
 
 from plant_rt import TRUTH_FIELDS
+from protocol import ccodec
 
 #: Periods between two batched writes of the full-rate channels to the log.
 LOG_BATCH_PERIODS = 256
@@ -41,6 +44,34 @@ def _rows_array(rows: list[tuple], width: int) -> np.ndarray:
         raise ValueError(f"recorder: rows of {len(rows[0])} values where the log's channel has {width}")
     return np.fromiter(chain.from_iterable(rows), dtype=np.float64,
                        count=len(rows) * width).reshape(len(rows), width)
+
+
+#: The C codec's batch conversion of decoded messages into float64 rows, or None.
+_FIELDS_INTO = ccodec.fields_into if ccodec.AVAILABLE else None
+
+
+def _telemetry_row(msg) -> tuple:
+    """A TELEMETRY as its row: the period, then TELEMETRY_FIELDS."""
+    return (msg.period, msg.sector, msg.speed_source, msg.state, msg.gates,
+            msg.speed_feedback_rad_s, msg.speed_encoder_rad_s, msg.speed_raw_rad_s,
+            msg.speed_lpf_rad_s, msg.speed_ekf_rad_s, msg.flux_angle_rad, msg.ekf_angle_rad,
+            msg.flux_mag_wb, msg.torque_est_nm, msg.torque_ref_nm, msg.rotor_pos_conv_rad,
+            msg.rotor_pos_ekf_rad)
+
+
+def _telemetry_array(msgs: list) -> np.ndarray:
+    """TELEMETRY messages as (n, 1 + len(TELEMETRY_FIELDS)) float64 rows: by the C codec in one
+    call (protocol.ccodec.fields_into, 2-3 ns a value), or here from their attributes when it
+    is not built or the list holds other objects (bench replays)."""
+    width = 1 + len(TELEMETRY_FIELDS)
+    out = np.empty((len(msgs), width), dtype=np.float64)
+    if _FIELDS_INTO is not None:
+        try:
+            _FIELDS_INTO(msgs, out, 0)
+            return out
+        except TypeError:
+            pass
+    return _rows_array([_telemetry_row(m) for m in msgs], width)
 
 
 def _log_times(periods, period_s: float) -> np.ndarray:
@@ -71,7 +102,9 @@ class Recorder:
         self.periods: list[int] = []
         self.truth_rows: list[tuple] = []
         self.sensor_rows: list[tuple] = []
-        self.telemetry_rows: list[tuple] = []
+        # TELEMETRY messages as they came: their rows are made by the C codec a batch at a
+        # time (telemetry_rows, flush_log), none per period
+        self._telemetry_msgs: list = []
         self.command_rows: list[tuple] = []
         # Step signals that change now and then (board fault code, injected faults):
         # name -> [(period, value)], held until the next change.
@@ -98,7 +131,7 @@ class Recorder:
             [("period", "fixed32")] + [(f, "fixed32" if i < 4 else "float")
                                        for i, f in enumerate(TELEMETRY_FIELDS)])
         self._logged_periods = len(self.periods)
-        self._logged_telemetry = len(self.telemetry_rows)
+        self._logged_telemetry = len(self._telemetry_msgs)
         log.before_flush(self.flush_log)
 
     def period(self, k: int, truth: tuple, sample) -> None:
@@ -114,21 +147,32 @@ class Recorder:
             live.period(k, truth, sample)
 
     def telemetry(self, msg) -> None:
-        row = (msg.period, msg.sector, msg.speed_source, msg.state, msg.gates,
-               msg.speed_feedback_rad_s, msg.speed_encoder_rad_s, msg.speed_raw_rad_s,
-               msg.speed_lpf_rad_s, msg.speed_ekf_rad_s, msg.flux_angle_rad, msg.ekf_angle_rad,
-               msg.flux_mag_wb, msg.torque_est_nm, msg.torque_ref_nm, msg.rotor_pos_conv_rad,
-               msg.rotor_pos_ekf_rad)
-        self.telemetry_rows.append(row)
+        self._telemetry_msgs.append(msg)
         live = self.live
         if live is not None and msg.period % live.every == 0:
-            live.telemetry_row(row)
+            live.telemetry_row(_telemetry_row(msg))
+
+    @property
+    def telemetry_rows(self) -> np.ndarray:
+        """(TELEMETRY messages, period + TELEMETRY_FIELDS) float64 rows in arrival order, made
+        anew at each call (a run's worth: milliseconds; `latest` reads the newest value)."""
+        return _telemetry_array(self._telemetry_msgs)
+
+    def latest(self, group: str, index: int) -> float:
+        """Value `index` of the newest truth, sensors or telemetry row (the row's order:
+        telemetry's starts with the period), NaN before the first: for readers that poll
+        while a run goes on, at no conversion cost."""
+        if group == "telemetry":
+            msgs = self._telemetry_msgs
+            return float(_telemetry_row(msgs[-1])[index]) if msgs else math.nan
+        rows = self.truth_rows if group == "truth" else self.sensor_rows
+        return float(rows[-1][index]) if rows else math.nan
 
     def clear(self) -> None:
         """Forgets the rows kept in memory (a long run that checks as it goes), after writing
         to the log the ones it does not have yet."""
         self.flush_log()
-        for rows in (self.periods, self.truth_rows, self.sensor_rows, self.telemetry_rows):
+        for rows in (self.periods, self.truth_rows, self.sensor_rows, self._telemetry_msgs):
             rows.clear()
         self._logged_periods = self._logged_telemetry = 0
 
@@ -137,12 +181,10 @@ class Recorder:
         the log flushes or closes)."""
         if self._log is None:
             return
-        if len(self.periods) < self._logged_periods or \
-                len(self.telemetry_rows) < self._logged_telemetry:
+        if len(self.periods) < self._logged_periods:
             # the lists were emptied behind the recorder's back (use clear()): what they held
             # and the log did not is gone; log from here on
-            self._logged_periods = min(self._logged_periods, len(self.periods))
-            self._logged_telemetry = min(self._logged_telemetry, len(self.telemetry_rows))
+            self._logged_periods = len(self.periods)
         a, b = self._logged_periods, len(self.periods)
         if b > a:
             t_ns = _log_times(self.periods[a:b], self.period_s)
@@ -152,9 +194,9 @@ class Recorder:
             sensors[:, 1:] = _rows_array(self.sensor_rows[a:b], len(SENSOR_FIELDS))
             self._sensor_ch.write_many(t_ns, sensors)
             self._logged_periods = b
-        a, b = self._logged_telemetry, len(self.telemetry_rows)
+        a, b = self._logged_telemetry, len(self._telemetry_msgs)
         if b > a:
-            rows = _rows_array(self.telemetry_rows[a:b], 1 + len(TELEMETRY_FIELDS))
+            rows = _telemetry_array(self._telemetry_msgs[a:b])
             self._telemetry_ch.write_many(_log_times(rows[:, 0], self.period_s), rows)
             self._logged_telemetry = b
 
@@ -212,8 +254,8 @@ class Recorder:
                     idx = np.searchsorted(at, k, side="right") - 1
                     values[idx >= 0] = np.asarray([r[1] for r in rows])[idx[idx >= 0]]
                 out[name] = (t, values, "")
-        if self.telemetry_rows:
-            tel = np.asarray(self.telemetry_rows, dtype=np.float64)
+        if self._telemetry_msgs:
+            tel = self.telemetry_rows
             t_tel = tel[:, 0] * self.period_s
             for i, name in enumerate(TELEMETRY_FIELDS):
                 out[f"ctrl.{name}"] = (t_tel, tel[:, i + 1], unit_of(name))

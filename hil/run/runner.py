@@ -95,13 +95,13 @@ def live_getter(session: BenchSession, name: str) -> Callable[[], float]:
     rec = session.recorder
     if group == "plant" and fld in TRUTH_FIELDS:
         i = TRUTH_FIELDS.index(fld)
-        return lambda: rec.truth_rows[-1][i] if rec.truth_rows else math.nan
+        return lambda: rec.latest("truth", i)
     if group == "sensor" and fld in SENSOR_FIELDS:
         i = SENSOR_FIELDS.index(fld)
-        return lambda: rec.sensor_rows[-1][i] if rec.sensor_rows else math.nan
+        return lambda: rec.latest("sensors", i)
     if group == "ctrl" and fld in TELEMETRY_FIELDS:
         i = TELEMETRY_FIELDS.index(fld) + 1
-        return lambda: rec.telemetry_rows[-1][i] if rec.telemetry_rows else math.nan
+        return lambda: rec.latest("telemetry", i)
     if group == "cmd" and fld in COMMAND_FIELDS:
         i = COMMAND_FIELDS.index(fld) + 1
         return lambda: rec.command_rows[-1][i] if rec.command_rows else math.nan

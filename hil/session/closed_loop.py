@@ -73,8 +73,8 @@ class ClosedLoop:
         self.session.drain()                 # the last period's TELEMETRY
         truth = np.asarray(rec.truth_rows[first:], dtype=np.float64)
         out = {name: truth[:, i] for i, name in enumerate(TRUTH_FIELDS)}
-        tel = np.asarray([row for row in rec.telemetry_rows if k0 <= row[0] < k0 + n],
-                         dtype=np.float64).reshape(-1, 1 + len(TELEMETRY_FIELDS))
+        tel = rec.telemetry_rows
+        tel = tel[(tel[:, 0] >= k0) & (tel[:, 0] < k0 + n)]
         for i, name in enumerate(TELEMETRY_FIELDS):
             out["tm_" + name] = tel[:, i + 1]
         return out

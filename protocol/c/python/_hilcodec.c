@@ -930,6 +930,99 @@ static PyObject *mod_exchange_sample(PyObject *self, PyObject *const *args, Py_s
     return result;
 }
 
+PyDoc_STRVAR(fields_into_doc,
+"fields_into(messages, buffer, offset) -> rows\n\n"
+"Writes the fields of each decoded message of the list `messages` (instances of one of\n"
+"protocol/messages.py's classes, all of the same class), in declaration order, as native\n"
+"float64 values into the writable `buffer` from byte `offset` on, one row after the other,\n"
+"and returns how many rows it wrote: a recorder's batch of rows with no Python float made.\n"
+"Every field must be an int or a float (TypeError naming the message and field otherwise);\n"
+"nothing is written unless every row fits (ValueError).");
+
+static const msg_class *class_of(PyObject *msg, int *type)
+{
+    for (int t = HIL_MSG_HELLO; t < NTYPES; t++) {
+        if (classes[t].cls != NULL && Py_IS_TYPE(msg, classes[t].cls)) {
+            *type = t;
+            return &classes[t];
+        }
+    }
+    PyErr_Format(PyExc_TypeError, "fields_into: %s is not a protocol message", Py_TYPE(msg)->tp_name);
+    return NULL;
+}
+
+static PyObject *mod_fields_into(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    (void)self;
+    if (nargs != 3) {
+        PyErr_SetString(PyExc_TypeError, "fields_into takes 3 arguments");
+        return NULL;
+    }
+    if (!ready()) {
+        return NULL;
+    }
+    if (!PyList_Check(args[0])) {
+        PyErr_SetString(PyExc_TypeError, "fields_into: messages must be a list");
+        return NULL;
+    }
+    Py_ssize_t offset = PyLong_AsSsize_t(args[2]);
+    if (offset == -1 && PyErr_Occurred()) {
+        return NULL;
+    }
+    Py_ssize_t rows = PyList_GET_SIZE(args[0]);
+    if (rows == 0) {
+        return PyLong_FromLong(0);
+    }
+    int type = 0;
+    const msg_class *mc = class_of(PyList_GET_ITEM(args[0], 0), &type);
+    if (mc == NULL) {
+        return NULL;
+    }
+    Py_buffer view;
+    if (PyObject_GetBuffer(args[1], &view, PyBUF_WRITABLE | PyBUF_C_CONTIGUOUS) < 0) {
+        return NULL;
+    }
+    size_t row_size = (size_t)mc->nfields * sizeof(double);
+    if (offset < 0 || (size_t)offset > (size_t)view.len ||
+        ((size_t)view.len - (size_t)offset) / row_size < (size_t)rows) {
+        PyBuffer_Release(&view);
+        return PyErr_Format(PyExc_ValueError, "fields_into: %zd rows of %zu bytes from offset %zd do not "
+                            "fit a buffer of %zd", rows, row_size, offset, view.len);
+    }
+    /* Converted row by row into the buffer; on an error the rows before stay written but the
+     * caller is told by the exception that the batch is not whole. */
+    double *out = (double *)(void *)((char *)view.buf + offset);
+    for (Py_ssize_t r = 0; r < rows; r++) {
+        PyObject *msg = PyList_GET_ITEM(args[0], r);
+        if (!Py_IS_TYPE(msg, mc->cls)) {
+            PyBuffer_Release(&view);
+            return PyErr_Format(PyExc_TypeError, "fields_into: message %zd is a %s among %s messages", r,
+                                Py_TYPE(msg)->tp_name, mc->cls->tp_name);
+        }
+        for (int i = 0; i < mc->nfields; i++) {
+            PyObject *v = SLOT(msg, mc->off[i]);
+            double d;
+            if (v != NULL && PyFloat_CheckExact(v)) {
+                d = PyFloat_AS_DOUBLE(v);
+            } else if (v != NULL && (PyFloat_Check(v) || PyLong_Check(v))) {
+                d = PyFloat_AsDouble(v);
+                if (d == -1.0 && PyErr_Occurred()) {
+                    PyBuffer_Release(&view);
+                    return NULL;
+                }
+            } else {
+                PyBuffer_Release(&view);
+                return PyErr_Format(PyExc_TypeError, "fields_into: message %zd, %s '%s' is %s, not a number",
+                                    r, mc->cls->tp_name, field_names[type][i],
+                                    v == NULL ? "unset" : Py_TYPE(v)->tp_name);
+            }
+            memcpy(out + (size_t)r * (size_t)mc->nfields + (size_t)i, &d, sizeof d);
+        }
+    }
+    PyBuffer_Release(&view);
+    return PyLong_FromSsize_t(rows);
+}
+
 /* ------------------------------------------------------------------ module */
 
 static PyMethodDef module_methods[] = {
@@ -937,6 +1030,7 @@ static PyMethodDef module_methods[] = {
     {"encode_frame", (PyCFunction)(void (*)(void))mod_encode_frame, METH_FASTCALL, encode_frame_doc},
     {"crc16", mod_crc16, METH_O, crc16_doc},
     {"exchange_sample", (PyCFunction)(void (*)(void))mod_exchange_sample, METH_FASTCALL, exchange_sample_doc},
+    {"fields_into", (PyCFunction)(void (*)(void))mod_fields_into, METH_FASTCALL, fields_into_doc},
     {NULL, NULL, 0, NULL},
 };
 

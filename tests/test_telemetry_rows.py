@@ -1,0 +1,88 @@
+"""TELEMETRY rows made by the C codec a batch at a time (protocol.ccodec.fields_into), as the
+recorder keeps and logs them: values in the SPEC's field order, errors, and the same rows with
+and without the C codec."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from hil.logs import recorder as recorder_module
+from hil.logs.recorder import TELEMETRY_FIELDS, Recorder
+from protocol import ccodec
+from protocol.messages import Duty, Gates, Telemetry
+
+needs_c = pytest.mark.skipif(not ccodec.AVAILABLE, reason=ccodec.UNAVAILABLE_REASON)
+
+
+def _telemetry(k: int) -> Telemetry:
+    return Telemetry(k, 3, 2, 1, 0x21, *[0.25 * k + i for i in range(12)])
+
+
+@needs_c
+def test_fields_into_writes_telemetry_rows_in_the_spec_field_order():
+    """Expected rows written out by hand from the fields (SPEC order: period, sector,
+    speed_source, state, gates, then the twelve floats), never from the function itself."""
+    buf = bytearray(8 * 40)
+    first = Telemetry(70000, 6, 1, 2, 0x2A, -1.5, 2.0, 3.25, 4.0, 5.0, -3.0, 3.0, 0.0928, 1.5, -2.0,
+                      0.125, -0.125)
+    second = Telemetry(70001, 1, 0, 2, 0x09, 0.0, -0.0, 1e-300, 1e300, -7.5, 0.5, -0.5, 0.1, 0.0, 0.0,
+                       3.0, -3.0)
+    assert ccodec.fields_into([first, second], buf, 8) == 2
+    got = np.frombuffer(buf, dtype=np.float64)
+    assert got[0] == 0.0 and got[35:].tolist() == [0.0] * 5
+    assert got[1:18].tolist() == [70000.0, 6.0, 1.0, 2.0, 42.0, -1.5, 2.0, 3.25, 4.0, 5.0, -3.0, 3.0,
+                                  0.0928, 1.5, -2.0, 0.125, -0.125]
+    assert got[18:35].tolist() == [70001.0, 1.0, 0.0, 2.0, 9.0, 0.0, -0.0, 1e-300, 1e300, -7.5, 0.5,
+                                   -0.5, 0.1, 0.0, 0.0, 3.0, -3.0]
+    assert ccodec.fields_into([], buf, 0) == 0
+    assert ccodec.fields_into([Gates(5, 0x21)], buf, 0) == 1 and got[:2].tolist() == [5.0, 33.0]
+
+
+@needs_c
+def test_fields_into_refuses_what_does_not_fit_or_is_not_a_number_by_name():
+    buf = bytearray(8 * 40)
+    msg = _telemetry(1)
+    with pytest.raises(ValueError, match="2 rows of 136 bytes from offset 64 do not fit"):
+        ccodec.fields_into([msg, msg], buf, 64)
+    with pytest.raises(ValueError, match="do not fit"):
+        ccodec.fields_into([msg], buf, -8)
+    with pytest.raises(TypeError, match="message 0, Duty 'duty' is tuple"):
+        ccodec.fields_into([Duty(1, (1, 2, 3))], buf, 0)
+    with pytest.raises(TypeError, match="message 1 is a Gates among Telemetry messages"):
+        ccodec.fields_into([msg, Gates(1, 0)], buf, 0)
+    with pytest.raises(TypeError, match="tuple is not a protocol message"):
+        ccodec.fields_into([(1, 2)], buf, 0)
+    with pytest.raises(TypeError, match="must be a list"):
+        ccodec.fields_into((msg,), buf, 0)
+    with pytest.raises(BufferError):
+        ccodec.fields_into([msg], bytes(200), 0)
+
+
+def test_recorder_telemetry_rows_are_the_same_with_and_without_the_c_codec(monkeypatch, tmp_path):
+    """The rows in memory and in the log: from the C codec, from the Python attribute path,
+    and written out here field by field, all equal."""
+    from hil.logs.mcap_writer import McapLog
+    from hil.logs.reader import read_log
+
+    msgs = [_telemetry(k) for k in range(700)]            # more than two log batches
+    want = np.array([[getattr(m, f) for f in ("period",) + TELEMETRY_FIELDS] for m in msgs])
+    for fields_into in (recorder_module._FIELDS_INTO, None):
+        monkeypatch.setattr(recorder_module, "_FIELDS_INTO", fields_into)
+        rec = Recorder(50e-6)
+        log = McapLog(tmp_path / f"{fields_into is None}.mcap")
+        rec.attach_log(log)
+        for k, m in enumerate(msgs):
+            rec.period(k, (k * 50e-6,) + (0.0,) * 18, _Sample())
+            rec.telemetry(m)
+        assert np.array_equal(rec.telemetry_rows, want)
+        assert rec.latest("telemetry", 1) == 3.0 and rec.latest("telemetry", 0) == 699.0
+        log.close()
+        logged = read_log(tmp_path / f"{fields_into is None}.mcap")["/ctrl/telemetry"]
+        sector, speed = logged["sector"], logged["speed_feedback_rad_s"]
+        assert len(sector) == 700 and np.all(sector == 3)
+        assert np.array_equal(speed, want[:, 5].astype(np.float32))
+    assert np.isnan(Recorder(50e-6).latest("telemetry", 0))
+
+
+class _Sample:
+    adc_i1, adc_i2, adc_vdc, encoder, status = 2048, 2048, 3000, 0, 0
