@@ -12,7 +12,9 @@ the firmware at once and whatever it answers is queued for ``recv``, which never
 from __future__ import annotations
 
 import ctypes
+from array import array
 from collections import deque
+from functools import partial
 from pathlib import Path
 
 from protocol.can_mapping import DEFAULT_BASE_ID, CanReassembler, can_pack
@@ -115,6 +117,9 @@ class _FirmwareLibrary(Link):
         self._raw = bytearray()       # answers not yet decoded (read_bytes takes them raw)
         self._closed = False
         self.tx_bytes = self.rx_bytes = self.tx_frames = self.rx_frames = 0
+        # What the C period exchange did (sample_exchange): frames out, frames in, bytes out,
+        # bytes in, and a closed flag it checks before each call (the instance is freed on close)
+        self.exchange_counts = array("q", [0] * 5)
 
     # -- serial
     def send(self, msg) -> None:
@@ -193,7 +198,9 @@ class _FirmwareLibrary(Link):
             c.update(tx_frames=self.tx_frames, rx_frames=self.rx_frames)
             return c
         c = dict(self._decoder.counters)
-        c.update(tx_frames=self.tx_frames, tx_bytes=self.tx_bytes, rx_bytes=self.rx_bytes)
+        x = self.exchange_counts
+        c.update(tx_frames=self.tx_frames + x[0], tx_bytes=self.tx_bytes + x[2],
+                 rx_bytes=self.rx_bytes + x[3])
         return c
 
     @property
@@ -203,6 +210,7 @@ class _FirmwareLibrary(Link):
     def close(self) -> None:
         if not self._closed:
             self._closed = True
+            self.exchange_counts[4] = 1
             self._lib.hil_fw_destroy(self._fw)
             self._fw = None
 
@@ -216,40 +224,29 @@ class FirmwareLibraryLink(_FirmwareLibrary):
 
     def exchange_target(self) -> tuple[int, int] | None:
         """(address of hil_fw_exchange, instance) for a caller that drives the firmware from C
-        (protocol.ccodec's exchange_sample), or None once closed; sample_exchange() builds the
-        per-period function on it that also keeps this link's counters."""
+        (protocol.ccodec's exchange_sample), or None once closed."""
         if self._closed:
             return None
         return ctypes.cast(self._lib.hil_fw_exchange, ctypes.c_void_p).value, self._fw
 
     def sample_exchange(self, exchange_sample, encoder, decoder, cap_out: bytearray,
-                        cap_in: bytearray, frames: dict[str, int], inbox, take_earlier):
+                        cap_in: bytearray, inbox):
         """A function (k, adc_i1, adc_i2, adc_vdc, encoder, status) for a link tap that drives
-        this firmware from C (protocol.ccodec's `exchange_sample`): bytes the firmware answered
-        earlier go to `take_earlier` first, then one C call sends SAMPLE(k), appends both
-        directions' frames to the captures, counts them here and in `frames`, and queues the
-        answers in `inbox`. The per-period path of every in-process lockstep run, so it holds
-        the function's address and the link's buffers instead of asking each period."""
+        this firmware from C (protocol.ccodec's `exchange_sample`, bound to this firmware and
+        the tap's codec, captures and inbox; a functools.partial, so no Python frame a
+        period): one C call sends SAMPLE(k), appends both directions' frames to the captures,
+        counts them in `exchange_counts` and queues the answers in `inbox`. Only while
+        `exchange_ready` (answers to earlier frames are still in the link's buffer otherwise);
+        once the link is closed the call raises ValueError instead of reaching the freed
+        instance. The per-period path of every in-process lockstep run."""
         fn, fw = self.exchange_target()
-        raw = self._raw
+        return partial(exchange_sample, fn, fw, encoder, decoder, cap_out, cap_in,
+                       self.exchange_counts, inbox)
 
-        def exchange(k, adc_i1, adc_i2, adc_vdc, encoder_count, status):
-            if self._closed:
-                raise LinkError(f"{self.url}: link is closed")
-            if raw:                       # answers to earlier frames come first
-                earlier = bytes(raw)
-                raw.clear()
-                take_earlier(earlier)
-            n_out, n_in = len(cap_out), len(cap_in)
-            msgs, frames_in = exchange_sample(fn, fw, encoder, decoder, cap_out, cap_in, k,
-                                              adc_i1, adc_i2, adc_vdc, encoder_count, status)
-            frames["out"] += 1
-            frames["in"] += frames_in
-            self.tx_bytes += len(cap_out) - n_out
-            self.tx_frames += 1
-            self.rx_bytes += len(cap_in) - n_in
-            inbox.extend(msgs)
-        return exchange
+    @property
+    def exchange_ready(self) -> bool:
+        """Open, and no answer to an earlier frame waiting to be read (they come first)."""
+        return not self._closed and not self._raw
 
 
 class FirmwareLibraryCanLink(_FirmwareLibrary):

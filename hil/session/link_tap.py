@@ -88,6 +88,10 @@ class LinkTap:
         # Raw frames since the last take_capture(): the session batches them into the log.
         self.captured = {d: bytearray() for d in DIRECTIONS}
         self.captured_frames = {d: 0 for d in DIRECTIONS}
+        # frames the C period exchange captured (the link's exchange_counts), and how many of
+        # them the last take_capture() already counted
+        self._exchange_counts = None
+        self._exchange_taken = (0, 0)
 
     # ---------------------------------------------------------------- faults
     def set_fault(self, name: str, fault: LinkFault) -> None:
@@ -218,14 +222,20 @@ class LinkTap:
                 or not isinstance(self._decoder, ccodec.StreamDecoder)
                 or self.link.exchange_target() is None):
             return None
+        counts = self.link.exchange_counts
+        if self._exchange_counts is not counts:
+            self._exchange_counts = counts
+            self._exchange_taken = (counts[0], counts[1])
         return make(ccodec.exchange_sample, self._encoder, self._decoder, self.captured["out"],
-                    self.captured["in"], self.captured_frames, self.inbox, self._take_in)
+                    self.captured["in"], self.inbox)
 
     @property
     def fast_ready(self) -> bool:
-        """No link fault, nothing held, no half-read frame: the C exchange may bypass the tap
-        (messages already queued stay first: the exchange appends behind them)."""
-        return not self.faults and not self._held and not self._partial
+        """No link fault, nothing held, no half-read frame, and the link has nothing of its own
+        waiting: the C exchange may bypass the tap (messages already queued stay first: the
+        exchange appends behind them)."""
+        return (not self.faults and not self._held and not self._partial
+                and self._exchange_counts is not None and self.link.exchange_ready)
 
     def _take_in(self, data: bytes) -> None:
         buf = self._partial
@@ -264,6 +274,12 @@ class LinkTap:
                 return None
 
     def take_capture(self) -> dict[str, tuple[bytes, int]]:
+        counts = self._exchange_counts
+        if counts is not None:          # what the C exchange captured since the last time
+            out0, in0 = self._exchange_taken
+            self.captured_frames["out"] += counts[0] - out0
+            self.captured_frames["in"] += counts[1] - in0
+            self._exchange_taken = (counts[0], counts[1])
         out = {}
         for d in DIRECTIONS:
             out[d] = (bytes(self.captured[d]), self.captured_frames[d])

@@ -837,21 +837,30 @@ static size_t count_delimiters(const uint8_t *p, size_t n)
 }
 
 PyDoc_STRVAR(exchange_sample_doc,
-"exchange_sample(exchange, fw, encoder, decoder, capture_out, capture_in, period, adc_i1, adc_i2,\n"
-"                adc_vdc, encoder_count, status) -> (messages, frames_in)\n\n"
+"exchange_sample(exchange, fw, encoder, decoder, capture_out, capture_in, counts, inbox, period,\n"
+"                adc_i1, adc_i2, adc_vdc, encoder_count, status) -> None\n\n"
 "One lockstep period with firmware in this process (hil_fw_abi.h), in one call: SAMPLE is\n"
 "encoded by the bench's C codec with encoder's sequence number, handed to the firmware's\n"
 "hil_fw_exchange (address `exchange`, instance `fw`) which decodes it with its own codec and\n"
 "answers; the answer bytes are decoded by `decoder`. Every byte still crosses both codecs; what\n"
 "is saved is the Python between them. The raw frames are appended to the bytearrays\n"
-"capture_out and capture_in (None: not captured). Returns the decoded messages and the number\n"
-"of frames the firmware sent.");
+"capture_out and capture_in (None: not captured), the decoded messages go to inbox.extend(),\n"
+"and counts (a writable buffer of 5 native int64: frames out, frames in, bytes out, bytes in,\n"
+"closed) gains 1, the frames the firmware sent and both byte counts. A non-zero `closed`\n"
+"(set by the link before it destroys the instance) refuses the call with ValueError, so a\n"
+"caller holding the arguments can never reach a freed instance.");
+
+static PyObject *str_extend; /* "extend", interned at module init */
+
+static PyObject *exchange_period(void *fn_addr, void *fw, EncoderObject *enc, DecoderObject *dec,
+                                 PyObject *capture_out, PyObject *capture_in, PyObject *inbox,
+                                 PyObject *const *fields, int64_t counts[5]);
 
 static PyObject *mod_exchange_sample(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     (void)self;
-    if (nargs != 12) {
-        PyErr_SetString(PyExc_TypeError, "exchange_sample takes 12 arguments");
+    if (nargs != 14) {
+        PyErr_SetString(PyExc_TypeError, "exchange_sample takes 14 arguments");
         return NULL;
     }
     if (!ready()) {
@@ -878,10 +887,37 @@ static PyObject *mod_exchange_sample(PyObject *self, PyObject *const *args, Py_s
     }
     EncoderObject *enc = (EncoderObject *)args[2];
     DecoderObject *dec = (DecoderObject *)args[3];
+    Py_buffer counts_view;
+    if (PyObject_GetBuffer(args[6], &counts_view, PyBUF_WRITABLE | PyBUF_C_CONTIGUOUS) < 0) {
+        return NULL;
+    }
+    int64_t counts[5];
+    if (counts_view.len < (Py_ssize_t)sizeof counts) {
+        PyBuffer_Release(&counts_view);
+        PyErr_SetString(PyExc_ValueError, "exchange_sample: counts must hold 5 int64");
+        return NULL;
+    }
+    memcpy(counts, counts_view.buf, sizeof counts);
+    if (counts[4] != 0) {
+        PyBuffer_Release(&counts_view);
+        PyErr_SetString(PyExc_ValueError, "exchange_sample: the firmware instance is closed");
+        return NULL;
+    }
+    PyObject *result = exchange_period(fn_addr, fw, enc, dec, args[4], args[5], args[7], args + 8, counts);
+    memcpy(counts_view.buf, counts, sizeof counts);
+    PyBuffer_Release(&counts_view);
+    return result;
+}
+
+/* exchange_sample less its argument checks: counts[0..3] are updated in place. */
+static PyObject *exchange_period(void *fn_addr, void *fw, EncoderObject *enc, DecoderObject *dec,
+                                 PyObject *capture_out, PyObject *capture_in, PyObject *inbox,
+                                 PyObject *const *fields, int64_t counts[5])
+{
     unsigned long v[6];
     static const unsigned long max[6] = {0xFFFFFFFFul, 0xFFFFul, 0xFFFFul, 0xFFFFul, 0xFFFFul, 0x0Ful};
     for (int i = 0; i < 6; i++) {
-        v[i] = PyLong_AsUnsignedLong(args[6 + i]);
+        v[i] = PyLong_AsUnsignedLong(fields[i]);
         if (PyErr_Occurred() || v[i] > max[i]) {
             PyErr_Clear();
             return PyErr_Format(PyExc_ValueError, "exchange_sample: SAMPLE field %d out of range", i);
@@ -904,7 +940,7 @@ static PyObject *mod_exchange_sample(PyObject *self, PyObject *const *args, Py_s
         return NULL;
     }
     enc->seq = (enc->seq + 1u) & 0xFFu;
-    if (append_bytes(args[4], frame, (size_t)n_frame) < 0) {
+    if (append_bytes(capture_out, frame, (size_t)n_frame) < 0) {
         return NULL;
     }
     fw_exchange_fn exchange = (fw_exchange_fn)(uintptr_t)fn_addr;
@@ -913,11 +949,12 @@ static PyObject *mod_exchange_sample(PyObject *self, PyObject *const *args, Py_s
         return NULL;
     }
     uint8_t tx[EXCHANGE_TX_CAP];
-    size_t frames_in = 0;
+    size_t frames_in = 0, bytes_in = 0;
     size_t n = exchange(fw, frame, (size_t)n_frame, tx, sizeof tx);
     while (n > 0u) {
         frames_in += count_delimiters(tx, n);
-        if (append_bytes(args[5], tx, n) < 0 || decode_into(dec, tx, n, out) < 0) {
+        bytes_in += n;
+        if (append_bytes(capture_in, tx, n) < 0 || decode_into(dec, tx, n, out) < 0) {
             Py_DECREF(out);
             return NULL;
         }
@@ -926,8 +963,17 @@ static PyObject *mod_exchange_sample(PyObject *self, PyObject *const *args, Py_s
         }
         n = exchange(fw, NULL, 0u, tx, sizeof tx);   /* drain what did not fit */
     }
-    PyObject *result = Py_BuildValue("(Nn)", out, (Py_ssize_t)frames_in);
-    return result;
+    counts[0] += 1;
+    counts[1] += (int64_t)frames_in;
+    counts[2] += n_frame;
+    counts[3] += (int64_t)bytes_in;
+    PyObject *r = PyObject_CallMethodOneArg(inbox, str_extend, out);
+    Py_DECREF(out);
+    if (r == NULL) {
+        return NULL;
+    }
+    Py_DECREF(r);
+    Py_RETURN_NONE;
 }
 
 PyDoc_STRVAR(fields_into_doc,
@@ -1053,6 +1099,9 @@ PyMODINIT_FUNC PyInit__hilcodec(void)
         if (counter_keys[i] == NULL && (counter_keys[i] = PyUnicode_InternFromString(counter_names[i])) == NULL) {
             return NULL;
         }
+    }
+    if (str_extend == NULL && (str_extend = PyUnicode_InternFromString("extend")) == NULL) {
+        return NULL;
     }
     PyObject *m = PyModule_Create(&module_def);
     if (m == NULL) {
