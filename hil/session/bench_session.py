@@ -488,10 +488,13 @@ class BenchSession:
                                              sample.encoder, sample.status)
                         link.send(msg_out)
                     # One deadline per SAMPLE: other traffic is handled but never extends it.
-                    deadline = clock() + answer_timeout
-                    if first_sent is None:
+                    # It runs from the send, or, when messages were already queued behind it
+                    # (a firmware in this process answers inside the call), from the first
+                    # moment nothing is queued and the bench would wait: the queue is what was
+                    # already received, so no clock is read while the answer is in it.
+                    deadline = None if inbox else clock() + answer_timeout
+                    if first_sent is None and deadline is not None:
                         first_sent = deadline - answer_timeout
-                    wait = answer_timeout
                     if not recorded:
                         # The period's record needs nothing from the answer: made while a
                         # board in another process or on a wire computes it (off the critical
@@ -501,12 +504,30 @@ class BenchSession:
                         recorded = recording = True
                         recorder.period(k, plant.truth(), sample)
                         recording = False
-                        if answer_timeout > 0.0:
-                            wait = deadline - clock()
-                            if wait <= 0.0:
-                                wait = -1.0       # past the deadline: take only what is queued
-                    msg = inbox.popleft() if inbox else link.recv(max(wait, 0.0))
-                    while msg is not None:
+                    late = False                  # past the deadline: take only what is queued
+                    while True:
+                        if inbox:
+                            msg = inbox.popleft()
+                        else:
+                            now = clock()
+                            if deadline is None:
+                                deadline = now + answer_timeout
+                                if first_sent is None:
+                                    first_sent = now
+                            if late:
+                                msg = link.recv(0.0)
+                                if msg is not None and answer_timeout > 0.0 and \
+                                        now > deadline + answer_timeout:
+                                    break         # a flood: this wait is lost
+                            else:
+                                wait = deadline - now
+                                if wait <= 0.0:
+                                    late = True
+                                    msg = link.recv(0.0)
+                                else:
+                                    msg = link.recv(wait)
+                            if msg is None:
+                                break
                         t = type(msg)
                         if t is Gates:
                             if msg.period == k:
@@ -531,17 +552,6 @@ class BenchSession:
                             if others is None:
                                 others = set()
                             others.add(t.__name__.upper())
-                        if wait > 0.0:
-                            wait = deadline - clock()
-                            if wait <= 0.0:
-                                wait = -1.0       # past the deadline: take only what is queued
-                        if wait < 0.0:
-                            msg = link.recv(0.0)
-                            if msg is not None and answer_timeout > 0.0 and \
-                                    clock() > deadline + answer_timeout:
-                                break             # a flood: this wait is lost
-                        else:
-                            msg = inbox.popleft() if inbox else link.recv(wait)
                     if gates is not None or duty is not None:
                         break
             except (OSError, ValueError) as exc:  # LinkError is an OSError: the line is gone
@@ -565,9 +575,9 @@ class BenchSession:
                     self._watchdog_tripped(k, sends)
                 plant.step(None)
             else:
-                if watchdog.consecutive:
+                if watchdog.consecutive:          # (answered() at 0 would change nothing)
                     self._streak_others.clear()
-                watchdog.answered()
+                    watchdog.answered()
                 if duty is None:
                     if gates & (gates >> 1) & 0x15:
                         self._shoot_through(k, gates)
