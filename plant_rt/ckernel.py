@@ -8,6 +8,10 @@ scripts/bootstrap.sh) does the work of the plant's slow paths in one call each:
     settle       the projection and turn-on check of Network.begin
     leg_period   plant_rt.plant.Plant._leg_period (a PWM period as constant-vector pieces,
                  with its sign check)
+    sample       plant_rt.plant.Plant.sample with plant_rt.sensors.Sensors.read, the plain
+                 case (no sensor fault, no open phase; None otherwise, and when a noise buffer
+                 needs its refill: the plant then runs the Python code)
+    truth        plant_rt.plant.Plant.truth, the plain case (no open phase, load not locked)
 
 The Python code stays the reference and the fallback: it runs when the extension is not built
 (``AVAILABLE`` False, ``UNAVAILABLE_REASON`` says why) or when the environment sets
@@ -27,7 +31,7 @@ from pathlib import Path
 
 BUILD_DIR = Path(__file__).resolve().parent / "c" / "build"
 #: The interface this module speaks (the extension's ABI constant).
-ABI = 3
+ABI = 4
 
 
 def extension_path() -> Path:

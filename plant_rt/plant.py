@@ -24,8 +24,9 @@ Fault hooks (hil/faults/injector.py drives them; each costs nothing while it is 
 Slowly varying quantities (ripple, ramps) are held constant over a period at their value at
 the period's midpoint: a zero-order hold at 20 kHz, exact for the integration of that period.
 
-The slow paths (the PWM period as constant-vector pieces, the general network) run in the C
-kernel plant_rt/c/_plantnet.c when it is built (plant_rt.ckernel; HIL_PLANT_PURE_PYTHON=1 or
+The slow paths (the PWM period as constant-vector pieces, the general network) and the plain
+case of sample() and truth() (no sensor fault, no open phase...) run in the C kernel
+plant_rt/c/_plantnet.c when it is built (plant_rt.ckernel; HIL_PLANT_PURE_PYTHON=1 or
 use_c_kernel(False) keeps this Python code, the reference).
 """
 from __future__ import annotations
@@ -132,6 +133,7 @@ class Plant:
         self._ckernel = ckernel.KERNEL
         self.network.ckernel = self._ckernel
         self._timeline.kernel = self._ckernel
+        self._bind_readout(self._ckernel)
         self._rebuild()
 
     @property
@@ -153,6 +155,13 @@ class Plant:
         self._ckernel = kernel
         self.network.ckernel = kernel
         self._timeline.kernel = kernel
+        self._bind_readout(kernel)
+
+    def _bind_readout(self, kernel) -> None:
+        """sample() and truth() in the kernel when it has them (a kernel without, such as a
+        test's wrapper of the extension, leaves them in Python)."""
+        self._c_sample = getattr(kernel, "sample", None)
+        self._c_truth = getattr(kernel, "truth", None)
 
     # --------------------------------------------------------------- helpers
     def _rebuild(self) -> None:
@@ -592,6 +601,16 @@ class Plant:
         k = self.period
         if self._sample_k == k:
             return self._sample
+        c_sample = self._c_sample
+        if c_sample is not None and not self._zero_current and self._open_phase is None:
+            # The plain case in C (None: a fault, a noise refill... the code below, the
+            # reference, does it).
+            s = c_sample(self.sensors, self.motor, SensorSample, k, self._pa, self._pb,
+                         self._th, self._revs, self._vdc, self._flags)
+            if s is not None:
+                self._sample = s
+                self._sample_k = k
+                return s
         th = self._th
         if self._zero_current:
             ia = ib = 0.0
@@ -620,6 +639,13 @@ class Plant:
 
     def truth(self) -> tuple[float, ...]:
         """The plant's true state at t_k, in the order of TRUTH_FIELDS."""
+        c_truth = self._c_truth
+        if c_truth is not None and not self._zero_current and self._open_phase is None:
+            # The plain case in C (None: a locked load... the code below, the reference).
+            record = c_truth(self.motor, self.load, self.period, self._T, self._pa, self._pb,
+                             self._th, self._w, self._vdc, self._idc_int, self._u_int)
+            if record is not None:
+                return record
         m = self.motor
         pa, pb, th, w = self._pa, self._pb, self._th, self._w
         if self._zero_current:

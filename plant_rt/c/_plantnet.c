@@ -16,6 +16,10 @@
  *               the sign check of Plant._signs_hold.
  *   advance     MotorModel.advance (the driven and diode intervals of the general path).
  *   duty_windows  SwitchTimeline._duty_windows (the switches' on-intervals of a duty command).
+ *   sample      Plant.sample with Sensors.read (the ADC codes with their noise draws, the
+ *               encoder count, the status bits) in the plain case: no sensor fault, no open
+ *               phase, no noise buffer to refill (None otherwise: the Python code runs).
+ *   truth       Plant.truth's record in the plain case (no open phase, load not locked).
  *
  * Why hand-written C: with PWM, dead time and device drop the plant spends its time in the
  * Python interpreter's per-call overhead (about 50 RHS evaluations per 50 us period, each a few
@@ -25,7 +29,8 @@
  * with -ffp-contract=off, the same libm cos/sin), so the two agree to rounding and a run is
  * deterministic.
  *
- * Plain C99 and the CPython API; no state between calls (everything comes in as arguments).
+ * Plain C99 and the CPython API; no state between calls (everything comes in as arguments)
+ * but the class layouts sample and truth read slots at (see there).
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -1586,6 +1591,457 @@ fail:
     return NULL;
 }
 
+/* ------------------------------------------------------------------ sample and truth
+ *
+ * Plant.sample() (with Sensors.read and sensors._code) and Plant.truth() for the plain case:
+ * no open phase, some current flowing (not _zero_current), every ADC channel and the encoder
+ * on their plain path (_plain), the load not locked, no noise buffer exhausted. Anything else,
+ * and any value the Python code would raise on (a non-finite angle or code), makes the
+ * function return None without changing anything: the caller then runs the Python code, the
+ * reference (and the noise buffers' refill, GaussianNoise.block, stays there).
+ *
+ * The sensors, the motor and the load are __slots__ objects; their slots are read at the
+ * offsets of the classes' member descriptors, looked up once per class (a module-level cache
+ * holding the class: the one state kept between calls) and used only for an object of
+ * exactly that class, which must define the slots itself (a subclass runs the Python code).
+ * math.hypot is called as it is (its algorithm is CPython's own, not libm's hypot). */
+
+#include <structmember.h>
+
+#ifndef Py_T_OBJECT_EX
+#define Py_T_OBJECT_EX T_OBJECT_EX
+#endif
+
+#define MAX_SLOTS 8
+
+typedef struct {
+    PyTypeObject *type;     /* the class bound (a strong reference), or NULL */
+    int ok;                 /* 1: every name is a plain slot of it, at off[] */
+    const char *names[MAX_SLOTS];
+    Py_ssize_t off[MAX_SLOTS];
+} layout_t;
+
+enum { SE_I1, SE_I2, SE_VDC, SE_ENC, SE_OC, SE_OV, SE_PAIR };
+static layout_t L_SENSORS = {NULL, 0, {"i1", "i2", "vdc", "encoder", "overcurrent_trip_a",
+                                       "overvoltage_trip_v", "_pair", NULL}, {0}};
+enum { CH_BASE, CH_SCALE, CH_SD, CH_I, CH_BUF, CH_PLAIN, CH_TOP };
+static layout_t L_ADC = {NULL, 0, {"_base", "_scale", "noise_rms_counts", "_i", "_buf", "_plain",
+                                   "_top", NULL}, {0}};
+enum { EN_PLAIN, EN_CPR, EN_OFFSET, EN_BITS };
+static layout_t L_ENC = {NULL, 0, {"_plain", "counts_per_rev", "_offset", "counter_bits", NULL,
+                                   NULL, NULL, NULL}, {0}};
+enum { MO_P, MO_PSIM, MO_ILD, MO_ILQ, MO_KT, MO_LD, MO_LQ };
+static layout_t L_MOTOR = {NULL, 0, {"p", "psim", "ild", "ilq", "kt", "ld", "lq", NULL}, {0}};
+enum { LO_LOCKED, LO_T, LO_V, LO_KW };
+static layout_t L_LOAD = {NULL, 0, {"locked", "_t", "_v", "kw", NULL, NULL, NULL, NULL}, {0}};
+
+/* 1 when obj's class is bound (binding it now if it is new), 0 when its attributes are not
+ * all plain slots (no error set), -1 on an error. */
+static int bind(layout_t *lay, PyObject *obj)
+{
+    PyTypeObject *tp = Py_TYPE(obj);
+    if (lay->type == tp) {
+        return lay->ok;
+    }
+    Py_ssize_t off[MAX_SLOTS];
+    int ok = 1;
+    for (int i = 0; i < MAX_SLOTS && lay->names[i] != NULL && ok; i++) {
+        PyObject *d = PyObject_GetAttrString((PyObject *)tp, lay->names[i]);
+        if (d == NULL) {
+            if (!PyErr_ExceptionMatches(PyExc_AttributeError)) {
+                return -1;
+            }
+            PyErr_Clear();
+            ok = 0;
+            break;
+        }
+        if (Py_IS_TYPE(d, &PyMemberDescr_Type)) {
+            PyMemberDescrObject *md = (PyMemberDescrObject *)d;
+            /* the class's own slot: a subclass (which might override a method the Python
+             * code calls, MotorModel.currents, Load.torque...) runs the Python code */
+            ok = md->d_member->type == Py_T_OBJECT_EX && PyDescr_TYPE(md) == tp;
+            off[i] = md->d_member->offset;
+        } else {
+            ok = 0;
+        }
+        Py_DECREF(d);
+    }
+    Py_INCREF(tp);
+    Py_XSETREF(lay->type, tp);
+    lay->ok = ok;
+    if (ok) {
+        memcpy(lay->off, off, sizeof off);
+    }
+    return ok;
+}
+
+/* A bound slot's value (borrowed; NULL when unset). */
+static inline PyObject *slot(const layout_t *lay, PyObject *obj, int i)
+{
+    return *(PyObject **)((char *)obj + lay->off[i]);
+}
+
+#define EXACT_INT_LIMIT 4503599627370496.0 /* 2^52 */
+
+/* A float, or an int small enough that Python's mixed int/float operations on it give what
+ * the same operations on its double give: 1 with *out set, else 0 (no error set). */
+static inline int num(PyObject *o, double *out)
+{
+    if (o == NULL) {
+        return 0;
+    }
+    if (PyFloat_CheckExact(o)) {
+        *out = PyFloat_AS_DOUBLE(o);
+        return 1;
+    }
+    if (PyLong_CheckExact(o)) {
+        int overflow;
+        long long v = PyLong_AsLongLongAndOverflow(o, &overflow);
+        if (overflow || v > (long long)EXACT_INT_LIMIT || v < -(long long)EXACT_INT_LIMIT) {
+            return 0;
+        }
+        *out = (double)v;
+        return 1;
+    }
+    if (PyFloat_Check(o)) {     /* a subclass (numpy.float64): the same IEEE operations */
+        *out = PyFloat_AS_DOUBLE(o);
+        return 1;
+    }
+    return 0;
+}
+
+/* An int in [lo, hi]: 1 with *out set, else 0 (no error set). */
+static int int_in(PyObject *o, long long lo, long long hi, long long *out)
+{
+    if (o == NULL || !PyLong_CheckExact(o)) {
+        return 0;
+    }
+    int overflow;
+    long long v = PyLong_AsLongLongAndOverflow(o, &overflow);
+    if (overflow || v < lo || v > hi) {
+        return 0;
+    }
+    *out = v;
+    return 1;
+}
+
+/* sensors._code on the plain path: 1 with the code (and the noise index to store, or -1 when
+ * no draw was taken), 0 when the Python code must run. */
+static int adc_code(PyObject *ch, double value, long long *code, Py_ssize_t *i_next)
+{
+    const layout_t *a = &L_ADC;
+    double base, scale, sd;
+    long long top;
+    if (slot(a, ch, CH_PLAIN) != Py_True || !num(slot(a, ch, CH_BASE), &base)
+        || !num(slot(a, ch, CH_SCALE), &scale) || !num(slot(a, ch, CH_SD), &sd)
+        || !int_in(slot(a, ch, CH_TOP), 0, (long long)EXACT_INT_LIMIT, &top)) {
+        return 0;
+    }
+    double x = base + scale * value;
+    *i_next = -1;
+    if (sd != 0.0) {    /* Python's "if sd:" (NaN is true) */
+        long long i;
+        PyObject *buf = slot(a, ch, CH_BUF);
+        if (!int_in(slot(a, ch, CH_I), 0, PY_SSIZE_T_MAX - 1, &i) || buf == NULL
+            || !PyList_CheckExact(buf) || i >= PyList_GET_SIZE(buf)) {
+            return 0;   /* also the refill (GaussianNoise.block), left to Python */
+        }
+        PyObject *draw = PyList_GET_ITEM(buf, (Py_ssize_t)i);
+        if (!PyFloat_CheckExact(draw)) {
+            return 0;
+        }
+        x += sd * PyFloat_AS_DOUBLE(draw);
+        *i_next = (Py_ssize_t)i + 1;
+    }
+    double y = x + 0.5;
+    if (!isfinite(y)) {
+        return 0;       /* int() raises */
+    }
+    double t = trunc(y);    /* int() truncates towards zero */
+    *code = t < 0.0 ? 0 : t > (double)top ? top : (long long)t;
+    return 1;
+}
+
+/* Stores an advanced noise index (a new reference to index is taken over). */
+static void put_index(PyObject *ch, PyObject *index)
+{
+    PyObject **p = (PyObject **)((char *)ch + L_ADC.off[CH_I]);
+    Py_XSETREF(*p, index);
+}
+
+#define STATUS_OVERCURRENT 0x02
+#define STATUS_OVERVOLTAGE 0x04
+static double INV_2PI, TWO_PI, PI_, RPM_PER_RAD_S;
+static PyObject *MATH_HYPOT;
+
+PyDoc_STRVAR(sample_doc,
+"sample(sensors, motor, sample_type, period, pa, pb, th, revs, vdc, flags) -> sample or None\n\n"
+"Plant.sample's reading (Sensors.read) when no open phase and current flows, for plain\n"
+"sensors and noise buffers that need no refill; None (nothing changed) otherwise: then run\n"
+"the Python code. Advances the channels' noise indices as Python does.");
+
+static PyObject *mod_sample(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    (void)self;
+    if (nargs != 10) {
+        PyErr_SetString(PyExc_TypeError, "sample takes 10 arguments");
+        return NULL;
+    }
+    PyObject *sensors = args[0], *motor = args[1], *period = args[3];
+    PyTypeObject *stype = (PyTypeObject *)args[2];
+    if (!PyType_Check(args[2]) || !PyType_IsSubtype(stype, &PyTuple_Type)) {
+        PyErr_SetString(PyExc_TypeError, "sample_type must be a tuple type");
+        return NULL;
+    }
+    int r;
+    if ((r = bind(&L_SENSORS, sensors)) <= 0 || (r = bind(&L_MOTOR, motor)) <= 0) {
+        goto python;
+    }
+    PyObject *ch[3] = {slot(&L_SENSORS, sensors, SE_I1), slot(&L_SENSORS, sensors, SE_I2),
+                       slot(&L_SENSORS, sensors, SE_VDC)};
+    PyObject *enc = slot(&L_SENSORS, sensors, SE_ENC);
+    PyObject *pair = slot(&L_SENSORS, sensors, SE_PAIR);
+    for (int j = 0; j < 3; j++) {
+        if (ch[j] == NULL || (r = bind(&L_ADC, ch[j])) <= 0) {
+            goto python;
+        }
+    }
+    if (enc == NULL || (r = bind(&L_ENC, enc)) <= 0) {
+        goto python;
+    }
+    double p, psim, ild, ilq, pa, pb, th, vdc, oc, ov;
+    long long revs, flags, x, y, cpr, offset, bits;
+    if (!num(slot(&L_MOTOR, motor, MO_P), &p) || !num(slot(&L_MOTOR, motor, MO_PSIM), &psim)
+        || !num(slot(&L_MOTOR, motor, MO_ILD), &ild) || !num(slot(&L_MOTOR, motor, MO_ILQ), &ilq)
+        || !num(slot(&L_SENSORS, sensors, SE_OC), &oc)
+        || !num(slot(&L_SENSORS, sensors, SE_OV), &ov)
+        || !num(args[4], &pa) || !num(args[5], &pb) || !PyFloat_Check(args[6])
+        || !num(args[8], &vdc)
+        || !int_in(args[7], -(1LL << 31), 1LL << 31, &revs)
+        || !int_in(args[9], LONG_MIN, LONG_MAX, &flags)
+        || pair == NULL || !PyTuple_CheckExact(pair) || PyTuple_GET_SIZE(pair) != 2
+        || !int_in(PyTuple_GET_ITEM(pair, 0), LLONG_MIN, LLONG_MAX, &x)
+        || !int_in(PyTuple_GET_ITEM(pair, 1), LLONG_MIN, LLONG_MAX, &y)
+        || slot(&L_ENC, enc, EN_PLAIN) != Py_True
+        || !int_in(slot(&L_ENC, enc, EN_CPR), -(1LL << 31), 1LL << 31, &cpr)
+        || !int_in(slot(&L_ENC, enc, EN_OFFSET), -(1LL << 60), 1LL << 60, &offset)
+        || !int_in(slot(&L_ENC, enc, EN_BITS), 0, 62, &bits)) {
+        goto python;
+    }
+    th = PyFloat_AS_DOUBLE(args[6]);
+    /* Plant.sample: the currents */
+    double e = p * th;
+    if (!isfinite(e)) {
+        goto python;    /* math.cos raises on an infinity (and a NaN makes int() raise) */
+    }
+    double c = cos(e), s = sin(e);
+    double i_d = (c * pa + s * pb - psim) * ild;
+    double i_q = (c * pb - s * pa) * ilq;
+    double ia = c * i_d - s * i_q, ib = s * i_d + c * i_q;
+    /* Sensors.read */
+    double i_a = ia;
+    double i_b = -0.5 * ia + S32 * ib;
+    double i_c = -0.5 * ia - S32 * ib;
+    long status = (long)flags;
+    if (!(-oc <= i_a && i_a <= oc && -oc <= i_b && i_b <= oc && -oc <= i_c && i_c <= oc)) {
+        status |= STATUS_OVERCURRENT;
+    }
+    if (vdc > ov) {
+        status |= STATUS_OVERVOLTAGE;
+    }
+    long long code[3];
+    Py_ssize_t next[3];
+    if (!adc_code(ch[0], x == 0 ? i_a : i_b, &code[0], &next[0])
+        || !adc_code(ch[1], y == 1 ? i_b : i_c, &code[1], &next[1])
+        || !adc_code(ch[2], vdc, &code[2], &next[2])) {
+        goto python;
+    }
+    /* the encoder: position = revs cpr + floor(theta_m cpr / 2 pi) */
+    double fl = floor(th * (double)cpr * INV_2PI);
+    if (!(fabs(fl) <= EXACT_INT_LIMIT)) {
+        goto python;    /* floor raises on an infinity or NaN */
+    }
+    long long position = revs * cpr + (long long)fl;
+    unsigned long long mask = (1ULL << bits) - 1ULL;
+    long long count = (long long)((unsigned long long)(position + offset) & mask);
+    /* the new objects first, then the channels' indices (nothing changes on an error) */
+    PyObject *out = stype->tp_alloc(stype, 6);
+    PyObject *idx[3] = {NULL, NULL, NULL};
+    if (out == NULL) {
+        return NULL;
+    }
+    Py_INCREF(period);
+    PyTuple_SET_ITEM(out, 0, period);
+    PyObject *items[5] = {PyLong_FromLongLong(code[0]), PyLong_FromLongLong(code[1]),
+                          PyLong_FromLongLong(code[2]), PyLong_FromLongLong(count),
+                          PyLong_FromLong(status)};
+    int failed = 0;
+    for (int j = 0; j < 5; j++) {
+        failed |= items[j] == NULL;
+        PyTuple_SET_ITEM(out, 1 + j, items[j]);     /* a NULL item is fine for the DECREF */
+    }
+    for (int j = 0; j < 3; j++) {
+        if (next[j] >= 0) {
+            idx[j] = PyLong_FromSsize_t(next[j]);
+            failed |= idx[j] == NULL;
+        }
+    }
+    if (failed) {
+        Py_DECREF(out);
+        for (int j = 0; j < 3; j++) {
+            Py_XDECREF(idx[j]);
+        }
+        return NULL;
+    }
+    for (int j = 0; j < 3; j++) {
+        if (idx[j] != NULL) {
+            put_index(ch[j], idx[j]);
+        }
+    }
+    return out;
+python:
+    if (r < 0) {
+        return NULL;
+    }
+    Py_RETURN_NONE;
+}
+
+/* Load.profile(t): 1 with *out set, else 0 (not two float lists of the same length, or a
+ * division by zero). */
+static int load_profile_at(PyObject *ts, PyObject *vs, double t, double *out)
+{
+    if (ts == NULL || vs == NULL || !PyList_CheckExact(ts) || !PyList_CheckExact(vs)) {
+        return 0;
+    }
+    Py_ssize_t n = PyList_GET_SIZE(ts);
+    if (n == 0 || PyList_GET_SIZE(vs) != n) {
+        return 0;
+    }
+    for (Py_ssize_t j = 0; j < n; j++) {
+        if (!PyFloat_Check(PyList_GET_ITEM(ts, j)) || !PyFloat_Check(PyList_GET_ITEM(vs, j))) {
+            return 0;
+        }
+    }
+#define AT(lst, j) PyFloat_AS_DOUBLE(PyList_GET_ITEM((lst), (j)))
+    /* bisect.bisect_right(ts, t) */
+    Py_ssize_t lo = 0, hi = n;
+    while (lo < hi) {
+        Py_ssize_t mid = (Py_ssize_t)(((size_t)lo + (size_t)hi) / 2);
+        if (t < AT(ts, mid)) {
+            hi = mid;
+        } else {
+            lo = mid + 1;
+        }
+    }
+    if (lo == 0) {
+        *out = AT(vs, 0);
+        return 1;
+    }
+    if (lo == n) {
+        *out = AT(vs, n - 1);
+        return 1;
+    }
+    double t0 = AT(ts, lo - 1), t1 = AT(ts, lo);
+    double dt = t1 - t0;
+    if (dt == 0.0) {
+        return 0;
+    }
+    *out = AT(vs, lo - 1) + (AT(vs, lo) - AT(vs, lo - 1)) * (t - t0) / dt;
+#undef AT
+    return 1;
+}
+
+PyDoc_STRVAR(truth_doc,
+"truth(motor, load, period, T, pa, pb, th, w, vdc, idc_int, u_int) -> tuple or None\n\n"
+"Plant.truth's record (TRUTH_FIELDS) when no open phase and current flows and the load is\n"
+"not locked; None otherwise: then run the Python code.");
+
+static PyObject *mod_truth(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    (void)self;
+    if (nargs != 11) {
+        PyErr_SetString(PyExc_TypeError, "truth takes 11 arguments");
+        return NULL;
+    }
+    PyObject *motor = args[0], *load = args[1], *u_int = args[10];
+    int r;
+    if ((r = bind(&L_MOTOR, motor)) <= 0 || (r = bind(&L_LOAD, load)) <= 0) {
+        goto python;
+    }
+    double p, psim, ild, ilq, kt, ld, lq, kw, T, pa, pb, th, w, vdc, idc, u0, u1;
+    long long period;
+    if (!num(slot(&L_MOTOR, motor, MO_P), &p) || !num(slot(&L_MOTOR, motor, MO_PSIM), &psim)
+        || !num(slot(&L_MOTOR, motor, MO_ILD), &ild) || !num(slot(&L_MOTOR, motor, MO_ILQ), &ilq)
+        || !num(slot(&L_MOTOR, motor, MO_KT), &kt) || !num(slot(&L_MOTOR, motor, MO_LD), &ld)
+        || !num(slot(&L_MOTOR, motor, MO_LQ), &lq)
+        || slot(&L_LOAD, load, LO_LOCKED) != Py_False || !num(slot(&L_LOAD, load, LO_KW), &kw)
+        || !int_in(args[2], -(long long)EXACT_INT_LIMIT, (long long)EXACT_INT_LIMIT, &period)
+        || !PyFloat_Check(args[3]) || !num(args[4], &pa) || !num(args[5], &pb)
+        || !num(args[6], &th) || !num(args[7], &w) || !num(args[8], &vdc) || !num(args[9], &idc)
+        || !PyTuple_CheckExact(u_int) || PyTuple_GET_SIZE(u_int) != 2
+        || !num(PyTuple_GET_ITEM(u_int, 0), &u0) || !num(PyTuple_GET_ITEM(u_int, 1), &u1)) {
+        goto python;
+    }
+    T = PyFloat_AS_DOUBLE(args[3]);
+    double e = p * th;
+    if (!isfinite(e) || T == 0.0) {
+        goto python;    /* math.cos and math.remainder raise on an infinity, x / 0 raises */
+    }
+    /* MotorModel.currents */
+    double c = cos(e), s = sin(e);
+    double i_d = (c * pa + s * pb - psim) * ild;
+    double i_q = (c * pb - s * pa) * ilq;
+    double ia = c * i_d - s * i_q, ib = s * i_d + c * i_q;
+    double t = (double)period * T;
+    /* MotorModel.torque */
+    double te = kt * (psim * i_q + (ld - lq) * i_d * i_q);
+    /* Load.torque */
+    double prof;
+    if (!load_profile_at(slot(&L_LOAD, load, LO_T), slot(&L_LOAD, load, LO_V), t, &prof)) {
+        goto python;
+    }
+    double tl = prof + kw * w;
+    /* wrap_angle(p th): math.remainder is exact, as C's remainder */
+    double wr = remainder(e, TWO_PI);
+    if (wr == -PI_) {
+        wr = PI_;
+    }
+    PyObject *hyp_args[2] = {args[4], args[5]};
+    PyObject *hyp = PyObject_Vectorcall(MATH_HYPOT, hyp_args, 2, NULL);
+    if (hyp == NULL) {
+        return NULL;
+    }
+    PyObject *out = PyTuple_New(19);
+    if (out == NULL) {
+        Py_DECREF(hyp);
+        return NULL;
+    }
+    PyObject *ia_o = PyFloat_FromDouble(ia);
+    Py_XINCREF(ia_o);
+    PyObject *items[19] = {
+        PyFloat_FromDouble(t), ia_o, PyFloat_FromDouble(-0.5 * ia + S32 * ib),
+        PyFloat_FromDouble(-0.5 * ia - S32 * ib), ia_o, PyFloat_FromDouble(ib),
+        Py_NewRef(args[4]), Py_NewRef(args[5]), hyp, PyFloat_FromDouble(te), Py_NewRef(args[7]),
+        PyFloat_FromDouble(w * RPM_PER_RAD_S), PyFloat_FromDouble(wr), Py_NewRef(args[6]),
+        Py_NewRef(args[8]), PyFloat_FromDouble(idc / T), PyFloat_FromDouble(tl),
+        PyFloat_FromDouble(u0 / T), PyFloat_FromDouble(u1 / T)};
+    int failed = 0;
+    for (int j = 0; j < 19; j++) {
+        failed |= items[j] == NULL;
+        PyTuple_SET_ITEM(out, j, items[j]);
+    }
+    if (failed) {
+        Py_DECREF(out);
+        return NULL;
+    }
+    return out;
+python:
+    if (r < 0) {
+        return NULL;
+    }
+    Py_RETURN_NONE;
+}
+
 static PyMethodDef methods[] = {
     {"integrate", (PyCFunction)(void (*)(void))mod_integrate, METH_FASTCALL, integrate_doc},
     {"settle", (PyCFunction)(void (*)(void))mod_settle, METH_FASTCALL, settle_doc},
@@ -1593,6 +2049,8 @@ static PyMethodDef methods[] = {
     {"advance", (PyCFunction)(void (*)(void))mod_advance, METH_FASTCALL, advance_doc},
     {"period", (PyCFunction)(void (*)(void))mod_period, METH_FASTCALL, period_doc},
     {"duty_windows", (PyCFunction)(void (*)(void))mod_duty_windows, METH_FASTCALL, duty_windows_doc},
+    {"sample", (PyCFunction)(void (*)(void))mod_sample, METH_FASTCALL, sample_doc},
+    {"truth", (PyCFunction)(void (*)(void))mod_truth, METH_FASTCALL, truth_doc},
     {NULL, NULL, 0, NULL},
 };
 
@@ -1621,12 +2079,27 @@ PyMODINIT_FUNC PyInit__plantnet(void)
     AX[1][1] = 0.5 * SQRT3;
     AX[2][0] = -0.5;
     AX[2][1] = -0.5 * SQRT3;
+    PI_ = 3.141592653589793;                /* math.pi */
+    TWO_PI = 2.0 * PI_;
+    INV_2PI = 1.0 / TWO_PI;
+    RPM_PER_RAD_S = 60.0 / TWO_PI;
+    if (MATH_HYPOT == NULL) {
+        PyObject *math = PyImport_ImportModule("math");
+        if (math == NULL) {
+            return NULL;
+        }
+        MATH_HYPOT = PyObject_GetAttrString(math, "hypot");
+        Py_DECREF(math);
+        if (MATH_HYPOT == NULL) {
+            return NULL;
+        }
+    }
     PyObject *mod = PyModule_Create(&module_def);
     if (mod == NULL) {
         return NULL;
     }
     /* The kernel's interface version: plant_rt/ckernel.py refuses a build of another one. */
-    if (PyModule_AddIntConstant(mod, "ABI", 3) < 0) {
+    if (PyModule_AddIntConstant(mod, "ABI", 4) < 0) {
         Py_DECREF(mod);
         return NULL;
     }
