@@ -46,13 +46,13 @@ def test_fields_into_refuses_what_does_not_fit_or_is_not_a_number_by_name():
         ccodec.fields_into([msg, msg], buf, 64)
     with pytest.raises(ValueError, match="do not fit"):
         ccodec.fields_into([msg], buf, -8)
-    with pytest.raises(TypeError, match="message 0, Duty 'duty' is tuple"):
+    with pytest.raises(TypeError, match="row 0, Duty 'duty' is tuple"):
         ccodec.fields_into([Duty(1, (1, 2, 3))], buf, 0)
-    with pytest.raises(TypeError, match="message 1 is a Gates among Telemetry messages"):
+    with pytest.raises(TypeError, match="row 1 is a Gates among Telemetry messages"):
         ccodec.fields_into([msg, Gates(1, 0)], buf, 0)
-    with pytest.raises(TypeError, match="tuple is not a protocol message"):
-        ccodec.fields_into([(1, 2)], buf, 0)
-    with pytest.raises(TypeError, match="must be a list"):
+    with pytest.raises(TypeError, match="float is neither a protocol message nor a tuple"):
+        ccodec.fields_into([1.5], buf, 0)
+    with pytest.raises(TypeError, match="rows must be a list"):
         ccodec.fields_into((msg,), buf, 0)
     with pytest.raises(BufferError):
         ccodec.fields_into([msg], bytes(200), 0)
