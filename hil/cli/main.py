@@ -16,7 +16,7 @@ from hil.links.registry import LINK_CHOICES
 EXIT_PASS, EXIT_FAIL, EXIT_ERROR = 0, 1, 2
 
 
-def _parser() -> argparse.ArgumentParser:
+def _parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="hil", description="hil-bench: hardware-in-the-loop test bench for motor-controller boards.")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -100,13 +100,16 @@ def _parser() -> argparse.ArgumentParser:
                        help="continue an interrupted sweep in --out without repeating finished runs")
     sweep.add_argument("--no-progress", action="store_true", help="no progress bar")
 
-    from hil.cli.init import add_arguments as init_arguments
-
     init = sub.add_parser("init", help="scaffold a bench project for your motor and firmware",
                           description="Write a bench profile from nameplate values, starter plans "
                                       "with limits derived from them, CI files and a README "
                                       "(docs/init.md).")
-    init_arguments(init)
+    # init's options come from hil.cli.init (its nameplate dataclass), imported only when the
+    # command line can be `hil init ...`: no other command parses them or shows them in --help.
+    if "init" in (sys.argv[1:] if argv is None else argv):
+        from hil.cli.init import add_arguments as init_arguments
+
+        init_arguments(init)
     return parser
 
 
@@ -137,7 +140,7 @@ def _imported(program: bool) -> None:
 
 
 def _main(argv: list[str] | None, program: bool) -> int:
-    args = _parser().parse_args(argv)
+    args = _parser(argv).parse_args(argv)
     try:
         if args.command == "run":
             from hil.run.runner import run_command

@@ -13,7 +13,6 @@ carrying its index and source line, for the runner (hil.run.runner) to execute.
 """
 from __future__ import annotations
 
-import difflib
 import math
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
@@ -757,6 +756,8 @@ class _BuildState:
     # ---------------------------------------------------------------- pieces
     def known_signal(self, name: str, path: KeyPath) -> str:
         if name not in SIGNAL_CATALOG:
+            import difflib      # an unknown signal's message only; not worth importing per plan
+
             close = difflib.get_close_matches(name, list(SIGNAL_CATALOG), n=1, cutoff=0.75)
             group = name.split(".", 1)[0]
             same = sorted(s for s in SIGNAL_CATALOG if s.startswith(group + "."))
