@@ -9,8 +9,10 @@ line and key).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import re
+import typing
 from typing import Any
 
 _NUMBER = re.compile(r"^[+-]?(\d+(\.\d*)?|\.\d+)([eE][+-]?\d+)?$")
@@ -24,6 +26,15 @@ def param(default: Any, *, gt: float | None = None, ge: float | None = None,
     if isinstance(default, (list, tuple)):
         return dataclasses.field(default_factory=lambda: tuple(default), metadata=meta)
     return dataclasses.field(default=default, metadata=meta)
+
+
+@functools.cache
+def type_hints(cls: type) -> dict[str, Any]:
+    """typing.get_type_hints(cls), worked out once per class. Under `from __future__ import
+    annotations` every annotation is a string that each get_type_hints call compiles and
+    evaluates again: loading a profile asked 22 times for its 11 classes. The dict is shared:
+    read it, do not change it."""
+    return typing.get_type_hints(cls)
 
 
 def field_map(cls: type) -> dict[str, dataclasses.Field]:

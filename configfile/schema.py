@@ -11,9 +11,9 @@ mean 'speed_rpm'?").
 from __future__ import annotations
 
 import dataclasses
-import typing
 from typing import TYPE_CHECKING, Any, Iterable, Mapping
 
+from configfile.fields import type_hints
 from configfile.source import ConfigError, KeyPath, YamlDocument
 
 if TYPE_CHECKING:
@@ -48,7 +48,7 @@ def dataclass_schema(cls: type) -> dict:
     dataclasses included. It checks the structure (known keys, mappings where sections are);
     values are converted and bound-checked by configfile.fields.coerce, which also accepts
     what YAML 1.1 leaves as text but is plainly a number (50e-6)."""
-    hints = typing.get_type_hints(cls)
+    hints = type_hints(cls)
     props: dict[str, Any] = {}
     for f in dataclasses.fields(cls):
         hint = hints[f.name]

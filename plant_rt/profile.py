@@ -14,7 +14,6 @@ from __future__ import annotations
 import copy
 import re
 import dataclasses
-import typing
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
@@ -27,7 +26,7 @@ from plant_rt.inverter import InverterParams
 from plant_rt.load import LoadParams
 from plant_rt.motor import MotorParams
 from plant_rt.sensors import SensorParams
-from configfile.fields import coerce, param, to_float
+from configfile.fields import coerce, param, to_float, type_hints
 
 
 
@@ -93,7 +92,7 @@ SECTIONS = {f.name for f in dataclasses.fields(BenchProfile)} - {"source"}
 def profile_schema() -> dict:
     """The profile's structure as JSON Schema (configfile.schema): every section a parameter
     dataclass, `controller` a mapping whose names the bench checks."""
-    hints = typing.get_type_hints(BenchProfile)
+    hints = type_hints(BenchProfile)
     sections = {name: nullable(dataclass_schema(hints[name]))
                 for name in SECTIONS if name not in ("controller", "session")}
     sections["controller"] = {"type": ["object", "null"]}
@@ -142,7 +141,7 @@ def build_profile(data: Any, err: Callable[[tuple, str], ConfigError],
     if not isinstance(data, dict):
         raise err((), "a bench profile is a mapping of sections "
                       f"({', '.join(sorted(SECTIONS))})")
-    hints = typing.get_type_hints(BenchProfile)
+    hints = type_hints(BenchProfile)
     sections: dict[str, Any] = {}
     for key, value in data.items():
         if key not in SECTIONS:
@@ -166,7 +165,7 @@ def _build(cls: type, data: Any, path: tuple, err: Callable[[tuple, str], Config
         data = {}
     if not isinstance(data, dict):
         raise err(path, f"expected a mapping with keys {', '.join(names)}")
-    hints = typing.get_type_hints(cls)
+    hints = type_hints(cls)
     kwargs = {}
     for key, value in data.items():
         if key not in names:
