@@ -649,7 +649,14 @@ uint8_t ctl_param_set(ctl *c, uint16_t id, float value, float *value_now)
     if (id == HIL_PARAM_RS_ID_PERIODS) {
         c->st.rs_id.phase = RSID_IDLE; /* (re)armed: runs at the next enable */
     }
+    /* ctl_derive sets the current zeros to the nominal one: what a zero calibration measured
+     * stays, as on a drive, unless the nominal zero is what was written */
+    float zero1 = c->cfg.clarke.offset1_counts, zero2 = c->cfg.clarke.offset2_counts;
     ctl_derive(c);
+    if (id != HIL_PARAM_CURRENT_OFFSET_COUNTS) {
+        c->cfg.clarke.offset1_counts = zero1;
+        c->cfg.clarke.offset2_counts = zero2;
+    }
     c->flux_ref_wb = c->cmd.flux_ref_wb > 0.0f ? c->cmd.flux_ref_wb : c->params.flux_ref_wb;
     *value_now = read_field(&c->params, d);
     return HIL_PARAM_OK;

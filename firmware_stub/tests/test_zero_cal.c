@@ -65,6 +65,34 @@ static void calibrates_each_channel_then_runs(void **state)
     assert_near(i.i_beta_a, (2.0 * (-0.5 * A_PER_COUNT)) / 1.7320508075688772, 1e-6);
 }
 
+/* A parameter written after the calibration (a gain changed mid-run) re-derives the board's
+ * configuration; the measured zero must survive it, as on a drive, unless the nominal zero
+ * itself is what was written. */
+static void the_measured_zero_survives_a_later_parameter_write(void **state)
+{
+    (void)state;
+    ctl c;
+    ctl_init(&c);
+    float v;
+    assert_int_equal(ctl_param_set(&c, HIL_PARAM_CURRENT_ZERO_CAL_PERIODS, 2.0f, &v), HIL_PARAM_OK);
+    ctl_step(&c, &(hil_sample){0}, NULL);
+    enable(&c);
+    for (uint32_t k = 0; k < 2u; ++k) {
+        hil_sample s = idle_sample(k + 1u, 2056u, 2040u);
+        ctl_step(&c, &s, NULL);
+    }
+    assert_near(c.cfg.clarke.offset1_counts, 2056.0, 1e-4);
+    assert_near(c.cfg.clarke.offset2_counts, 2040.0, 1e-4);
+    assert_int_equal(ctl_param_set(&c, HIL_PARAM_FLUX_BAND_WB, 0.002f, &v), HIL_PARAM_OK);
+    assert_near(c.cfg.clarke.offset1_counts, 2056.0, 1e-4);   /* kept */
+    assert_near(c.cfg.clarke.offset2_counts, 2040.0, 1e-4);
+    assert_int_equal(ctl_param_set(&c, HIL_PARAM_CURRENT_A_PER_COUNT, 0.0125f, &v), HIL_PARAM_OK);
+    assert_near(c.cfg.clarke.offset1_counts, 2056.0, 1e-4);   /* a scale is not a zero */
+    assert_int_equal(ctl_param_set(&c, HIL_PARAM_CURRENT_OFFSET_COUNTS, 2050.0f, &v), HIL_PARAM_OK);
+    assert_near(c.cfg.clarke.offset1_counts, 2050.0, 1e-4);   /* the zero written wins */
+    assert_near(c.cfg.clarke.offset2_counts, 2050.0, 1e-4);
+}
+
 static void off_by_default_and_bounded(void **state)
 {
     (void)state;
@@ -87,6 +115,7 @@ int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(calibrates_each_channel_then_runs),
+        cmocka_unit_test(the_measured_zero_survives_a_later_parameter_write),
         cmocka_unit_test(off_by_default_and_bounded),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
