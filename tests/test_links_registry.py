@@ -72,6 +72,25 @@ def test_exec_board_that_dies_names_its_status_and_stderr(tmp_path):
     assert "exited with status 3" in text and "flash: CRC mismatch at 0x0800" in text
 
 
+def test_a_board_process_leaves_no_pipe_open_once_its_session_ends():
+    """The bench reads the board's stderr to name its last lines on an exit; once the board
+    is gone the pipe is closed, not left for the garbage collector (a ResourceWarning)."""
+    import gc
+    import time
+    import warnings
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        with BenchSession(load_profile(), SessionConfig(link="stub-pty", hold_cpu_latency=False)) as s:
+            s.run_periods(20)
+            tail = s.conn._output
+        tail()                                   # the reader has seen the end of the pipe
+        time.sleep(0.05)
+        del s, tail                              # the session's Popen held the pipe
+        gc.collect()
+    assert [w for w in caught if issubclass(w.category, ResourceWarning)] == []
+
+
 @pytest.mark.parametrize("spec, needle", [
     ("exec:/nonexistent/board", "executable '/nonexistent/board' does not exist"),
     ("exec:/bin/true?transport=usb", "transport 'usb'; expected serial or slcan"),

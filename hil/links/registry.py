@@ -138,6 +138,8 @@ class _StderrTail:
                     self.lines.append(raw.decode("utf-8", "replace"))
         except (OSError, ValueError):
             pass
+        finally:
+            stream.close()              # the board closed its end: ours is done too
 
     def __call__(self) -> list[str]:
         self._thread.join(0.2)          # the process has exited: let its last lines arrive
