@@ -1,8 +1,8 @@
 """Keeps every period's plant truth, sensor values, telemetry and commands.
 
 In memory as plain lists (an append costs tens of nanoseconds; a TELEMETRY is kept as the
-message itself and its rows are made a batch at a time by the C codec, hil/logs/columns.py)
-for the checks at the end of a run, and in the MCAP log in batches: every
+message itself) for the checks at the end of a run; rows become float64 arrays a batch at a
+time, in one call of the C codec (protocol.ccodec.fields_into). In the MCAP log in batches: every
 `LOG_BATCH_PERIODS` periods the new rows go to the log at once
 (`FixedChannel.write_many`, numpy columns into the open chunk) instead of one
 Python call per message (cost per period: `python -m bench mcap_logging`). The log's crash bound grows by the
