@@ -824,14 +824,26 @@ static double advance_pieces(const cfg_t *m, int spm, double *st, const piece_t 
     return q / r;
 }
 
+/* MotorModel.currents: i_alpha, i_beta, i_d, i_q (out[0..3]) of the flux linkage (pa, pb) at
+ * the electrical angle e = p theta_m. */
+static void currents_at(double e, double psim, double ild, double ilq, double pa, double pb,
+                        double out[4])
+{
+    double c = cos(e), s = sin(e);
+    double i_d = (c * pa + s * pb - psim) * ild;
+    double i_q = (c * pb - s * pa) * ilq;
+    out[0] = c * i_d - s * i_q;
+    out[1] = s * i_d + c * i_q;
+    out[2] = i_d;
+    out[3] = i_q;
+}
+
 static void currents(const cfg_t *m, double pa, double pb, double th, double *ia, double *ib)
 {
-    double e = m->p * th;
-    double c = cos(e), s = sin(e);
-    double i_d = (c * pa + s * pb - m->psim) * m->ild;
-    double i_q = (c * pb - s * pa) * m->ilq;
-    *ia = c * i_d - s * i_q;
-    *ib = s * i_d + c * i_q;
+    double i[4];
+    currents_at(m->p * th, m->psim, m->ild, m->ilq, pa, pb, i);
+    *ia = i[0];
+    *ib = i[1];
 }
 
 /* ------------------------------------------------------------------ argument helpers */
@@ -1834,10 +1846,9 @@ static PyObject *mod_sample(PyObject *self, PyObject *const *args, Py_ssize_t na
     if (!isfinite(e)) {
         goto python;    /* math.cos raises on an infinity (and a NaN makes int() raise) */
     }
-    double c = cos(e), s = sin(e);
-    double i_d = (c * pa + s * pb - psim) * ild;
-    double i_q = (c * pb - s * pa) * ilq;
-    double ia = c * i_d - s * i_q, ib = s * i_d + c * i_q;
+    double i[4];
+    currents_at(e, psim, ild, ilq, pa, pb, i);
+    double ia = i[0], ib = i[1];
     /* Sensors.read */
     double i_a = ia;
     double i_b = -0.5 * ia + S32 * ib;
@@ -1987,11 +1998,9 @@ static PyObject *mod_truth(PyObject *self, PyObject *const *args, Py_ssize_t nar
     if (!isfinite(e) || T == 0.0) {
         goto python;    /* math.cos and math.remainder raise on an infinity, x / 0 raises */
     }
-    /* MotorModel.currents */
-    double c = cos(e), s = sin(e);
-    double i_d = (c * pa + s * pb - psim) * ild;
-    double i_q = (c * pb - s * pa) * ilq;
-    double ia = c * i_d - s * i_q, ib = s * i_d + c * i_q;
+    double i[4];
+    currents_at(e, psim, ild, ilq, pa, pb, i);
+    double ia = i[0], ib = i[1], i_d = i[2], i_q = i[3];
     double t = (double)period * T;
     /* MotorModel.torque */
     double te = kt * (psim * i_q + (ld - lq) * i_d * i_q);
