@@ -247,16 +247,14 @@ class Plant:
                 n = self._n_fast
                 kernel = self._ckernel
                 motor = self.motor
-                if kernel is not None:
+                tl0 = self._load_v0 + self._load_slope * (t0 - self._load_t)
+                if kernel is not None:       # the same RK4 in C (MotorModel.advance's mirror)
                     pa, pb, self._w, th_end = kernel.advance(
-                        motor._k, motor.spm, pa0, pb0, self._w, th, va, vb, T / n, n,
-                        self._load_v0 + self._load_slope * (t0 - self._load_t), self._load_slope,
-                        self._bw)
+                        motor._k, motor.spm, pa0, pb0, self._w, th, va, vb, T / n, n, tl0,
+                        self._load_slope, self._bw)
                 else:
                     pa, pb, self._w, th_end = motor.advance(
-                        pa0, pb0, self._w, th, va, vb, T / n, n,
-                        self._load_v0 + self._load_slope * (t0 - self._load_t), self._load_slope,
-                        self._bw)
+                        pa0, pb0, self._w, th, va, vb, T / n, n, tl0, self._load_slope, self._bw)
                 self._pa = pa
                 self._pb = pb
                 self._u_int = (va * T, vb * T)
