@@ -43,18 +43,12 @@ import statistics
 import struct
 import tempfile
 import time
-from operator import attrgetter
 from types import SimpleNamespace
 
 import numpy as np
 
+from hil.logs.recorder import telemetry_row as _fields
 from protocol.messages import Telemetry
-
-#: A TELEMETRY's values in its row's order (period first), as the per-message paths log them.
-_fields = attrgetter("period", "sector", "speed_source", "state", "gates", "speed_feedback_rad_s",
-                     "speed_encoder_rad_s", "speed_raw_rad_s", "speed_lpf_rad_s", "speed_ekf_rad_s",
-                     "flux_angle_rad", "ekf_angle_rad", "flux_mag_wb", "torque_est_nm",
-                     "torque_ref_nm", "rotor_pos_conv_rad", "rotor_pos_ekf_rad")
 
 VARIANTS = (("lz4", 64 * 1024), ("lz4", 1024 * 1024), ("zstd", 64 * 1024), ("none", 64 * 1024))
 

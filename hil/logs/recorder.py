@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 from itertools import chain
+from operator import attrgetter
 
 import numpy as np
 
@@ -62,19 +63,14 @@ def _rows_array(rows: list[tuple], width: int) -> np.ndarray:
     return _converted(rows, width, lambda: chain.from_iterable(rows))
 
 
-def _telemetry_row(msg) -> tuple:
-    """A TELEMETRY as its row: the period, then TELEMETRY_FIELDS."""
-    return (msg.period, msg.sector, msg.speed_source, msg.state, msg.gates,
-            msg.speed_feedback_rad_s, msg.speed_encoder_rad_s, msg.speed_raw_rad_s,
-            msg.speed_lpf_rad_s, msg.speed_ekf_rad_s, msg.flux_angle_rad, msg.ekf_angle_rad,
-            msg.flux_mag_wb, msg.torque_est_nm, msg.torque_ref_nm, msg.rotor_pos_conv_rad,
-            msg.rotor_pos_ekf_rad)
+#: A TELEMETRY as its row: the period, then TELEMETRY_FIELDS.
+telemetry_row = attrgetter("period", *TELEMETRY_FIELDS)
 
 
 def _telemetry_array(msgs: list) -> np.ndarray:
     """TELEMETRY messages as (n, 1 + len(TELEMETRY_FIELDS)) float64 rows."""
     return _converted(msgs, 1 + len(TELEMETRY_FIELDS),
-                      lambda: chain.from_iterable(map(_telemetry_row, msgs)))
+                      lambda: chain.from_iterable(map(telemetry_row, msgs)))
 
 
 def _log_times(periods, period_s: float) -> np.ndarray:
@@ -153,7 +149,7 @@ class Recorder:
         self._telemetry_msgs.append(msg)
         live = self.live
         if live is not None and msg.period % live.every == 0:
-            live.telemetry_row(_telemetry_row(msg))
+            live.telemetry_row(telemetry_row(msg))
 
     @property
     def telemetry_rows(self) -> np.ndarray:
@@ -167,7 +163,7 @@ class Recorder:
         while a run goes on, at no conversion cost."""
         if group == "telemetry":
             msgs = self._telemetry_msgs
-            return float(_telemetry_row(msgs[-1])[index]) if msgs else math.nan
+            return float(telemetry_row(msgs[-1])[index]) if msgs else math.nan
         rows = self.truth_rows if group == "truth" else self.sensor_rows
         return float(rows[-1][index]) if rows else math.nan
 
