@@ -1,0 +1,45 @@
+"""The process bench.period_instructions runs under callgrind: a lockstep session of the
+in-process stub (3000 rpm, EKF speed), warmed up, then `periods` more periods of one kind.
+
+    python -m bench._period_worker {stub,stub+log,plant} PERIODS
+
+Two runs that differ only in PERIODS differ by those periods' instructions: start-up, the
+handshake and the warm-up cancel. `plant` replays, on a fresh plant, the switch words the
+stub chose (sample, truth, step: the floor under any lockstep period, as in bench.session).
+"""
+from __future__ import annotations
+
+import sys
+import tempfile
+from pathlib import Path
+
+from plant_rt import Plant, load_profile
+
+from hil.session.bench_session import BenchSession, SessionConfig
+
+WARM_UP_PERIODS = 2000
+
+
+def main(kind: str, periods: int) -> None:
+    profile = load_profile()
+    with tempfile.TemporaryDirectory() as tmp:
+        log_path = Path(tmp) / "bench.mcap" if kind == "stub+log" else None
+        with BenchSession(profile, SessionConfig(link="stub", log_path=log_path)) as session:
+            session.send_command(enable=True, speed_source="ekf", speed_ref_rpm=3000)
+            session.run_periods(WARM_UP_PERIODS)
+            if kind == "plant":
+                session.run_periods(1000)
+                gates = [int(row[4]) for row in session.recorder.telemetry_rows[-1000:]]
+            else:
+                session.run_periods(periods)
+    if kind == "plant":
+        plant = Plant(profile, seed=0)
+        sample, truth, step = plant.sample, plant.truth, plant.step
+        for i in range(periods):
+            sample()
+            truth()
+            step(gates[i % len(gates)])
+
+
+if __name__ == "__main__":
+    main(sys.argv[1], int(sys.argv[2]))

@@ -1,0 +1,99 @@
+"""Instructions a lockstep period costs, counted by valgrind's callgrind: repeatable where the
+timings of bench.session drift 10-30 % on this VM, and split by where they go.
+
+For `stub`, `stub` with the full MCAP log, and the plant alone (sample, truth, step replaying
+the stub's switch words), each the difference of two runs of bench._period_worker that differ
+only in the number of periods (start-up, handshake and warm-up cancel). The logged period is
+then split into the C functions that do its work, by their inclusive counts:
+
+- ``exchange``: the C period exchange (protocol.ccodec.exchange_sample), of which
+  ``firmware`` is the stub itself (hil_fw_exchange: its decoder, control law and encoder) and
+  ``decode_answers`` is the bench's decoding of GATES and TELEMETRY into message objects;
+- ``plant_kernel``: the plant's C sample, truth and RK4 (plant_rt/c/_plantnet.c);
+- ``log_rows``: the batch conversion of rows to float64 (protocol.ccodec.fields_into);
+- ``lz4`` and ``crc32``: the MCAP chunks' compression and checksums;
+- ``python_and_objects``: the rest: the interpreter running the period loop, the plant's and
+  recorder's Python, object allocation, the MCAP writer's Python.
+
+The last is what a period loop in C would remove (with most of ``decode_answers``).
+"""
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+
+#: part name -> C functions whose inclusive counts it sums
+PARTS = {
+    "exchange": ("mod_exchange_sample",),
+    "firmware": ("hil_fw_exchange",),
+    "decode_answers": ("decode_into",),
+    "plant_kernel": ("mod_sample", "mod_truth", "mod_advance"),
+    "log_rows": ("mod_fields_into",),
+    "lz4": ("LZ4_compress_fast_continue",),
+    "crc32": ("crc32_z",),
+}
+
+
+def _inclusive(out_file: Path) -> dict[str, int]:
+    """Function name -> inclusive instructions (its largest entry: callgrind_annotate also
+    lists inlined header lines under the same name)."""
+    text = subprocess.run(["callgrind_annotate", "--inclusive=yes", "--threshold=100", str(out_file)],
+                          capture_output=True, text=True, check=True).stdout
+    found: dict[str, int] = {}
+    for line in text.splitlines():
+        m = re.match(r"\s*([\d,]+) \([\s\d.]+%\)\s+\S*:(\w+) \[", line)
+        if m is not None and "=>" not in line:
+            count = int(m.group(1).replace(",", ""))
+            found[m.group(2)] = max(found.get(m.group(2), 0), count)
+    return found
+
+
+def _run(kind: str, periods: int, out_file: Path) -> int:
+    env = dict(os.environ, PYTHONHASHSEED="0")
+    proc = subprocess.run(["valgrind", "--tool=callgrind", f"--callgrind-out-file={out_file}",
+                           sys.executable, "-m", "bench._period_worker", kind, str(periods)],
+                          capture_output=True, text=True, cwd=REPO, env=env)
+    m = re.search(r"Collected : (\d+)", proc.stderr)
+    if proc.returncode != 0 or m is None:
+        raise RuntimeError(f"bench._period_worker {kind} {periods} under callgrind failed:\n"
+                           f"{proc.stderr[-800:]}")
+    return int(m.group(1))
+
+
+def per_period(kind: str, periods: int, split: bool = False) -> dict:
+    with tempfile.TemporaryDirectory() as tmp, ThreadPoolExecutor(2) as pool:
+        short, long = Path(tmp) / "short.out", Path(tmp) / "long.out"
+        # the two runs side by side: instruction counts do not depend on the machine's load
+        runs = pool.submit(_run, kind, periods, long), pool.submit(_run, kind, 0, short)
+        total = (runs[0].result() - runs[1].result()) / periods
+        out = {"instructions_per_period": round(total)}
+        if split:
+            a, b = _inclusive(short), _inclusive(long)
+            parts = {name: round(sum(b.get(f, 0) - a.get(f, 0) for f in funcs) / periods)
+                     for name, funcs in PARTS.items()}
+            top = ("exchange", "plant_kernel", "log_rows", "lz4", "crc32")
+            parts["python_and_objects"] = round(total - sum(parts[p] for p in top))
+            out["parts"] = parts
+    return out
+
+
+def run(quick: bool = False) -> dict:
+    if shutil.which("valgrind") is None or shutil.which("callgrind_annotate") is None:
+        return {"error": "valgrind (callgrind) is not installed"}
+    # Long enough that the garbage collector's full passes (every so many surviving objects)
+    # average out: 1000 periods read 76,000 instructions for `stub` once, 4000 read 53,800.
+    periods = 2000 if quick else 4000
+    out = {"periods": periods, "stub": per_period("stub", periods),
+           "stub+log": per_period("stub+log", periods, split=True),
+           "plant_only": per_period("plant", periods)}
+    out["stub+log_vs_plant_only"] = round(out["stub+log"]["instructions_per_period"]
+                                          / out["plant_only"]["instructions_per_period"], 2)
+    return out
