@@ -502,3 +502,34 @@ def test_write_many_refuses_values_that_do_not_fit(tmp_path):
     with pytest.raises(ValueError, match="/s: expected 2 rows of 2 values"):
         ch.write_many([0, 1], [[1, 0.0, 3.0], [2, 0.0, 3.0]])
     log.close()
+
+
+def _protobuf_descriptor_set(message_name: str, fields: list[tuple[str, int]]) -> bytes:
+    """What the writer serialized with google.protobuf before it packed the schemas itself."""
+    package, _, short = message_name.rpartition(".")
+    file = descriptor_pb2.FileDescriptorProto(
+        name=message_name.replace(".", "/") + ".proto", package=package, syntax="proto3")
+    msg = file.message_type.add(name=short)
+    for number, (name, type_number) in enumerate(fields, start=1):
+        msg.field.add(name=name, number=number, type=type_number,
+                      label=descriptor_pb2.FieldDescriptorProto.LABEL_OPTIONAL)
+    return descriptor_pb2.FileDescriptorSet(file=[file]).SerializeToString()
+
+
+@pytest.mark.parametrize("message_name", ["hil.PlantTruth", "Bare", "a.b.c.Deep"])
+def test_hand_serialized_schemas_are_the_bytes_google_protobuf_writes(message_name):
+    """The writer builds its FileDescriptorSets without importing descriptor_pb2 (~30 ms of a
+    run's start): byte for byte what google.protobuf serializes, for every fixed type, field
+    numbers past 15 (two-byte tags), a message longer than 127 bytes (two-byte lengths) and an
+    empty package."""
+    from hil.logs.mcap_writer import bytes_descriptor_set, fixed_descriptor_set
+
+    f = descriptor_pb2.FieldDescriptorProto
+    for name, (type_number, _, _) in FIXED_TYPES.items():
+        assert type_number == getattr(f, f"TYPE_{name.upper()}"), name
+    for fields in (ALL_TYPES[:1], ALL_TYPES, ALL_TYPES * 9):
+        fields = [(f"{n}_{i}", t) for i, (n, t) in enumerate(fields)]
+        assert fixed_descriptor_set(message_name, fields) == _protobuf_descriptor_set(
+            message_name, [(n, FIXED_TYPES[t][0]) for n, t in fields])
+    assert bytes_descriptor_set(message_name) == _protobuf_descriptor_set(
+        message_name, [("count", f.TYPE_FIXED32), ("data", f.TYPE_BYTES)])

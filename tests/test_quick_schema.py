@@ -166,9 +166,9 @@ def test_what_the_quick_check_does_not_model_goes_to_jsonschema():
         assert not schema_accepts(schema, value)
 
 
-def test_hil_run_of_a_plan_without_faults_does_not_import_jsonschema(tmp_path):
-    """Valid plans and profiles pass the quick check; fault arguments are checked with
-    jsonschema only when wrong."""
+def test_hil_run_of_a_plan_without_faults_imports_neither_jsonschema_nor_protobuf(tmp_path):
+    """Valid plans and profiles pass the quick check; the MCAP schemas are serialized by hand
+    (hil.logs.mcap_writer); fault arguments are checked with jsonschema only when wrong."""
     plan = tmp_path / "one.yaml"
     plan.write_text("name: two-periods\nsteps:\n  - run: {duration_s: 100.0e-6}\n"
                     "  - check: {name: ran, kind: final_value, signal: plant.speed_rpm, "
@@ -176,7 +176,7 @@ def test_hil_run_of_a_plan_without_faults_does_not_import_jsonschema(tmp_path):
     code = ("import sys\nfrom hil.cli.main import main\n"
             f"rc = main(['run', {str(plan)!r}, '--out', {str(tmp_path / 'out')!r}, '--no-progress'])\n"
             "print(rc, sorted(m for m in sys.modules if m.split('.')[0] in "
-            "('jsonschema', 'referencing')))\n")
+            "('jsonschema', 'referencing', 'google')))\n")
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                           timeout=120, cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
