@@ -152,6 +152,13 @@ class Recorder:
             live.telemetry_row(telemetry_row(msg))
 
     @property
+    def telemetry_sink(self):
+        """What takes the next TELEMETRY message: telemetry(), or the list's own append while
+        no live viewer follows (a period loop binds it once per run_periods: one Python call
+        fewer a period)."""
+        return self.telemetry if self.live is not None else self._telemetry_msgs.append
+
+    @property
     def telemetry_rows(self) -> np.ndarray:
         """(TELEMETRY messages, period + TELEMETRY_FIELDS) float64 rows in arrival order, made
         anew at each call (a run's worth: milliseconds; `latest` reads the newest value)."""

@@ -449,7 +449,7 @@ class BenchSession:
         publish_every = self.publish_every
         tap = self.tap
         clock = time.monotonic
-        record_telemetry = recorder.telemetry
+        record_telemetry = recorder.telemetry_sink
         # what the link tap has already decoded is taken without a call (its recv() would
         # pop the same queue first); an untapped link has no such queue
         inbox = tap.inbox if tap is not None else ()
