@@ -107,3 +107,25 @@ def test_help_for_every_command():
         proc = subprocess.run([sys.executable, "-m", "hil.cli.main", *command, "--help"],
                               capture_output=True, text=True, timeout=60, cwd=REPO)
         assert proc.returncode == 0 and "usage: hil" in proc.stdout
+
+
+def _subparsers(parser):
+    import argparse
+
+    return next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices
+
+
+def test_a_command_line_builds_only_its_command_s_parser_with_the_same_arguments():
+    """`hil run ...` builds the run subparser alone (the argparse set-up of the other commands
+    is start-up time); its help, hence its arguments, are those of the parser of every command."""
+    import sys as _sys
+
+    hil_cli = _sys.modules["hil.cli.main"]
+    full = _subparsers(hil_cli._parser(["--help", "init"]))     # every command, init's options too
+    assert list(full) == list(hil_cli.COMMANDS)
+    for command in hil_cli.COMMANDS:
+        alone = _subparsers(hil_cli._parser([command, "p.yaml"] if command != "init" else ["init"]))
+        assert list(alone) == [command]
+        assert alone[command].format_help() == full[command].format_help()
+    args = hil_cli._parser(["run", "p.yaml", "--seed", "3"]).parse_args(["run", "p.yaml", "--seed", "3"])
+    assert args.command == "run" and args.seed == 3 and args.plans == [Path("p.yaml")]

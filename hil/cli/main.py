@@ -14,6 +14,7 @@ from pathlib import Path
 from hil.links.registry import LINK_CHOICES
 
 EXIT_PASS, EXIT_FAIL, EXIT_ERROR = 0, 1, 2
+COMMANDS = ("run", "serve", "log", "bench", "plans", "sweep", "init")
 
 
 def _parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
@@ -21,95 +22,109 @@ def _parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
         prog="hil", description="hil-bench: hardware-in-the-loop test bench for motor-controller boards.")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    run = sub.add_parser("run", help="run test plans against a board",
-                         description="Run YAML test plans (files, or directories of *.yaml) against a "
-                                     "board and write reports and MCAP logs into --out.")
-    run.add_argument("plans", nargs="+", type=Path, help="plan files or directories")
-    run.add_argument("--link", help=f"board link (default: the plan's, else stub): {', '.join(LINK_CHOICES)}")
-    run.add_argument("--mode", choices=("lockstep", "realtime"), help="clock (default: the plan's, else lockstep)")
-    run.add_argument("--out", type=Path, default=Path("out"), help="output directory (default: out)")
-    run.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
-    run.add_argument("--profile", metavar="NAME|PATH",
-                     help="run every plan on this bench profile (a name such as paper or "
-                          "paper-hardware, or a YAML path) instead of the plans' own profiles")
-    run.add_argument("--modbus", metavar="[HOST:]PORT", help="serve the Modbus control port while running")
-    run.add_argument("--no-progress", action="store_true", help="no progress bar")
-    run.add_argument("--live", metavar="[HOST:]PORT", nargs="?", const="127.0.0.1:8765",
-                     help="Foxglove WebSocket server while the plans run (default 127.0.0.1:8765)")
+    words = sys.argv[1:] if argv is None else argv
+    # A command line that starts with a command is parsed by that command's subparser alone, so
+    # only that one is built (each costs its argparse set-up: translations looked up, a help
+    # formatter, its arguments). Anything else (hil, hil --help, a misspelt command) builds them
+    # all, for the list of commands and the error message.
+    only = words[0] if words and words[0] in COMMANDS else None
 
-    serve = sub.add_parser("serve", help="run the plant alone for an external board",
-                           description="Run the plant in lockstep against a board until Ctrl-C (or "
-                                       "--duration), optionally with the Modbus control port.")
-    serve.add_argument("--link", default="stub", help=f"board link: {', '.join(LINK_CHOICES)}")
-    serve.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep")
-    serve.add_argument("--profile", type=Path, help="bench profile YAML (default: the paper's)")
-    serve.add_argument("--modbus", metavar="[HOST:]PORT", default="127.0.0.1:5020",
-                       help="Modbus TCP control port (default 127.0.0.1:5020; 'off' to disable)")
-    serve.add_argument("--duration", type=float, help="simulated seconds to run (default: until Ctrl-C)")
-    serve.add_argument("--log", type=Path, help="MCAP log path")
-    serve.add_argument("--speed-rpm", type=float, default=0.0,
-                       help="speed reference sent to the board (default 0)")
-    serve.add_argument("--speed-source", choices=("encoder", "conventional", "ekf"), default="encoder",
-                       help="speed feedback the board closes its loop on (default encoder)")
-    serve.add_argument("--enable", action="store_true",
-                       help="enable the board at start (otherwise: Modbus run bit)")
-    serve.add_argument("--live", metavar="[HOST:]PORT", nargs="?", const="127.0.0.1:8765",
-                       help="Foxglove WebSocket server for live viewing (default 127.0.0.1:8765)")
-    serve.add_argument("--live-rate-hz", type=float, default=1000.0,
-                       help="rows per second of simulated time sent to viewers (default 1000)")
-    serve.add_argument("--pace", choices=("fast", "realtime"), default="fast",
-                       help="lockstep as fast as it runs, or paced to the wall clock for a viewer")
+    if only in (None, "run"):
+        run = sub.add_parser("run", help="run test plans against a board",
+                             description="Run YAML test plans (files, or directories of *.yaml) against a "
+                                         "board and write reports and MCAP logs into --out.")
+        run.add_argument("plans", nargs="+", type=Path, help="plan files or directories")
+        run.add_argument("--link", help=f"board link (default: the plan's, else stub): {', '.join(LINK_CHOICES)}")
+        run.add_argument("--mode", choices=("lockstep", "realtime"), help="clock (default: the plan's, else lockstep)")
+        run.add_argument("--out", type=Path, default=Path("out"), help="output directory (default: out)")
+        run.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
+        run.add_argument("--profile", metavar="NAME|PATH",
+                         help="run every plan on this bench profile (a name such as paper or "
+                              "paper-hardware, or a YAML path) instead of the plans' own profiles")
+        run.add_argument("--modbus", metavar="[HOST:]PORT", help="serve the Modbus control port while running")
+        run.add_argument("--no-progress", action="store_true", help="no progress bar")
+        run.add_argument("--live", metavar="[HOST:]PORT", nargs="?", const="127.0.0.1:8765",
+                         help="Foxglove WebSocket server while the plans run (default 127.0.0.1:8765)")
 
-    log = sub.add_parser("log", help="inspect an MCAP log", description="Inspect an MCAP log of a run.")
-    log_sub = log.add_subparsers(dest="log_command", required=True, metavar="ACTION")
-    info = log_sub.add_parser("info", help="channels, message counts, duration, metadata")
-    info.add_argument("file", type=Path)
-    info.add_argument("--json", action="store_true", help="print JSON")
-    plot = log_sub.add_parser("plot", help="PNG plot of signals over a time window")
-    plot.add_argument("file", type=Path)
-    plot.add_argument("signals", nargs="+", help="e.g. plant.speed_rpm ctrl.speed_ekf_rad_s /plant/truth:i_a")
-    plot.add_argument("--out", type=Path, default=Path("plot.png"))
-    plot.add_argument("--from", dest="t0", type=float, help="start time, s")
-    plot.add_argument("--to", dest="t1", type=float, help="end time, s")
-    export = log_sub.add_parser("export", help="CSV export of channels")
-    export.add_argument("file", type=Path)
-    export.add_argument("channels", nargs="+", help="topics, e.g. /plant/truth")
-    export.add_argument("--out", type=Path, default=Path("export.csv"))
-    export.add_argument("--from", dest="t0", type=float)
-    export.add_argument("--to", dest="t1", type=float)
+    if only in (None, "serve"):
+        serve = sub.add_parser("serve", help="run the plant alone for an external board",
+                               description="Run the plant in lockstep against a board until Ctrl-C (or "
+                                           "--duration), optionally with the Modbus control port.")
+        serve.add_argument("--link", default="stub", help=f"board link: {', '.join(LINK_CHOICES)}")
+        serve.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep")
+        serve.add_argument("--profile", type=Path, help="bench profile YAML (default: the paper's)")
+        serve.add_argument("--modbus", metavar="[HOST:]PORT", default="127.0.0.1:5020",
+                           help="Modbus TCP control port (default 127.0.0.1:5020; 'off' to disable)")
+        serve.add_argument("--duration", type=float, help="simulated seconds to run (default: until Ctrl-C)")
+        serve.add_argument("--log", type=Path, help="MCAP log path")
+        serve.add_argument("--speed-rpm", type=float, default=0.0,
+                           help="speed reference sent to the board (default 0)")
+        serve.add_argument("--speed-source", choices=("encoder", "conventional", "ekf"), default="encoder",
+                           help="speed feedback the board closes its loop on (default encoder)")
+        serve.add_argument("--enable", action="store_true",
+                           help="enable the board at start (otherwise: Modbus run bit)")
+        serve.add_argument("--live", metavar="[HOST:]PORT", nargs="?", const="127.0.0.1:8765",
+                           help="Foxglove WebSocket server for live viewing (default 127.0.0.1:8765)")
+        serve.add_argument("--live-rate-hz", type=float, default=1000.0,
+                           help="rows per second of simulated time sent to viewers (default 1000)")
+        serve.add_argument("--pace", choices=("fast", "realtime"), default="fast",
+                           help="lockstep as fast as it runs, or paced to the wall clock for a viewer")
 
-    bench = sub.add_parser("bench", help="print every benchmark figure as JSON")
-    bench.add_argument("names", nargs="*", help="benchmarks (default all)")
-    bench.add_argument("--quick", action="store_true", help="fewer repetitions")
+    if only in (None, "log"):
+        log = sub.add_parser("log", help="inspect an MCAP log", description="Inspect an MCAP log of a run.")
+        log_sub = log.add_subparsers(dest="log_command", required=True, metavar="ACTION")
+        info = log_sub.add_parser("info", help="channels, message counts, duration, metadata")
+        info.add_argument("file", type=Path)
+        info.add_argument("--json", action="store_true", help="print JSON")
+        plot = log_sub.add_parser("plot", help="PNG plot of signals over a time window")
+        plot.add_argument("file", type=Path)
+        plot.add_argument("signals", nargs="+", help="e.g. plant.speed_rpm ctrl.speed_ekf_rad_s /plant/truth:i_a")
+        plot.add_argument("--out", type=Path, default=Path("plot.png"))
+        plot.add_argument("--from", dest="t0", type=float, help="start time, s")
+        plot.add_argument("--to", dest="t1", type=float, help="end time, s")
+        export = log_sub.add_parser("export", help="CSV export of channels")
+        export.add_argument("file", type=Path)
+        export.add_argument("channels", nargs="+", help="topics, e.g. /plant/truth")
+        export.add_argument("--out", type=Path, default=Path("export.csv"))
+        export.add_argument("--from", dest="t0", type=float)
+        export.add_argument("--to", dest="t1", type=float)
 
-    plans = sub.add_parser("plans", help="list and validate plans")
-    plans.add_argument("paths", nargs="*", type=Path, default=[Path("test_plans")])
+    if only in (None, "bench"):
+        bench = sub.add_parser("bench", help="print every benchmark figure as JSON")
+        bench.add_argument("names", nargs="*", help="benchmarks (default all)")
+        bench.add_argument("--quick", action="store_true", help="fewer repetitions")
 
-    sweep = sub.add_parser("sweep", help="run plans many times over a parameter space",
-                           description="Run a sweep file (test_plans/sweeps/): its plans over its "
-                                       "parameter space, on local processes or a Dask cluster; "
-                                       "writes results.parquet/.json, summary.json, index.html and "
-                                       "junit.xml into --out (docs/scale.md).")
-    sweep.add_argument("sweep", type=Path, help="sweep file")
-    where = sweep.add_mutually_exclusive_group()
-    where.add_argument("--workers", type=int, default=1, metavar="N",
-                       help="local worker processes (default 1)")
-    where.add_argument("--cluster", metavar="ADDRESS", help="Dask scheduler, e.g. tcp://HOST:8786")
-    sweep.add_argument("--out", type=Path, help="output directory (default out/sweeps/NAME)")
-    sweep.add_argument("--resume", action="store_true",
-                       help="continue an interrupted sweep in --out without repeating finished runs")
-    sweep.add_argument("--no-progress", action="store_true", help="no progress bar")
+    if only in (None, "plans"):
+        plans = sub.add_parser("plans", help="list and validate plans")
+        plans.add_argument("paths", nargs="*", type=Path, default=[Path("test_plans")])
 
-    init = sub.add_parser("init", help="scaffold a bench project for your motor and firmware",
-                          description="Write a bench profile from nameplate values, starter plans "
-                                      "with limits derived from them, CI files and a README "
-                                      "(docs/init.md).")
-    # init's options come from hil.cli.init (its nameplate dataclass), imported only when the
-    # command line can be `hil init ...`: no other command parses them or shows them in --help.
-    if "init" in (sys.argv[1:] if argv is None else argv):
-        from hil.cli.init import add_arguments as init_arguments
+    if only in (None, "sweep"):
+        sweep = sub.add_parser("sweep", help="run plans many times over a parameter space",
+                               description="Run a sweep file (test_plans/sweeps/): its plans over its "
+                                           "parameter space, on local processes or a Dask cluster; "
+                                           "writes results.parquet/.json, summary.json, index.html and "
+                                           "junit.xml into --out (docs/scale.md).")
+        sweep.add_argument("sweep", type=Path, help="sweep file")
+        where = sweep.add_mutually_exclusive_group()
+        where.add_argument("--workers", type=int, default=1, metavar="N",
+                           help="local worker processes (default 1)")
+        where.add_argument("--cluster", metavar="ADDRESS", help="Dask scheduler, e.g. tcp://HOST:8786")
+        sweep.add_argument("--out", type=Path, help="output directory (default out/sweeps/NAME)")
+        sweep.add_argument("--resume", action="store_true",
+                           help="continue an interrupted sweep in --out without repeating finished runs")
+        sweep.add_argument("--no-progress", action="store_true", help="no progress bar")
 
-        init_arguments(init)
+    if only in (None, "init"):
+        init = sub.add_parser("init", help="scaffold a bench project for your motor and firmware",
+                              description="Write a bench profile from nameplate values, starter plans "
+                                          "with limits derived from them, CI files and a README "
+                                          "(docs/init.md).")
+        # init's options come from hil.cli.init (its nameplate dataclass), imported only when the
+        # command line can be `hil init ...`: no other command parses them or shows them in --help.
+        if "init" in words:
+            from hil.cli.init import add_arguments as init_arguments
+
+            init_arguments(init)
     return parser
 
 

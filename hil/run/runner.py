@@ -469,14 +469,16 @@ def _step_text(step, plan) -> str:
 
 
 def run_command(args) -> int:
-    from hil.cli.serve import parse_host_port
-
     files = expand_plan_paths(args.plans)
     if not files:
         print(f"hil run: no plans found in {', '.join(map(str, args.plans))}", file=sys.stderr)
         return 2
     plans = [load_plan(f) for f in files]  # validate every plan before anything runs
-    modbus = parse_host_port(args.modbus) if args.modbus else None
+    modbus = None
+    if args.modbus:
+        from hil.cli.serve import parse_host_port
+
+        modbus = parse_host_port(args.modbus)
     live = None
     if getattr(args, "live", None):
         from hil.live import LiveStream, parse_live_address
