@@ -1,11 +1,13 @@
 """The process bench.period_instructions runs under callgrind: a lockstep session of the
 in-process stub (3000 rpm, EKF speed), warmed up, then `periods` more periods of one kind.
 
-    python -m bench._period_worker {stub,stub+log,plant} PERIODS
+    python -m bench._period_worker {stub,stub+log,stub+log@lz4_level0,plant} PERIODS
 
 Two runs that differ only in PERIODS differ by those periods' instructions: start-up, the
 handshake and the warm-up cancel. `plant` replays, on a fresh plant, the switch words the
 stub chose (sample, truth, step: the floor under any lockstep period, as in bench.session).
+`stub+log@lz4_level0` writes the log's chunks at the lz4 library's default level instead of
+the writer's LZ4_LEVEL.
 """
 from __future__ import annotations
 
@@ -21,9 +23,13 @@ WARM_UP_PERIODS = 2000
 
 
 def main(kind: str, periods: int) -> None:
+    if kind == "stub+log@lz4_level0":
+        from hil.logs import mcap_writer
+
+        mcap_writer.LZ4_LEVEL = 0
     profile = load_profile()
     with tempfile.TemporaryDirectory() as tmp:
-        log_path = Path(tmp) / "bench.mcap" if kind == "stub+log" else None
+        log_path = Path(tmp) / "bench.mcap" if kind.startswith("stub+log") else None
         with BenchSession(profile, SessionConfig(link="stub", log_path=log_path)) as session:
             session.send_command(enable=True, speed_source="ekf", speed_ref_rpm=3000)
             session.run_periods(WARM_UP_PERIODS)

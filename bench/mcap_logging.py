@@ -13,7 +13,8 @@ Timed, each on a fresh log over the same rows, variants interleaved `repeats` ti
 - ``recorder_path``: what a session does, `Recorder.period` / `telemetry` / `frames` for
   every period, so the full-rate channels go to the log in batches of
   `LOG_BATCH_PERIODS` through `FixedChannel.write_many`; with lz4 64 KiB chunks (the
-  default), lz4 1 MiB, zstd 64 KiB and no compression. The in-memory lists the recorder
+  default, at the writer's `LZ4_LEVEL`), lz4 1 MiB, lz4 64 KiB at the lz4 library's own
+  default level 0 (``lz4_level0_64KiB``), zstd 64 KiB and no compression. The in-memory lists the recorder
   keeps for the checks are part of the cost (they are there with or without a log).
 - ``per_message_path``: the same rows and the same in-memory lists, but one
   `FixedChannel.write` per message (the path before batching), lz4 64 KiB.
@@ -50,7 +51,14 @@ import numpy as np
 from hil.logs.recorder import telemetry_row as _fields
 from protocol.messages import Telemetry
 
-VARIANTS = (("lz4", 64 * 1024), ("lz4", 1024 * 1024), ("zstd", 64 * 1024), ("none", 64 * 1024))
+#: (compression, chunk size, lz4 level or None: the writer's default, LZ4_LEVEL)
+VARIANTS = (("lz4", 64 * 1024, None), ("lz4", 1024 * 1024, None), ("lz4", 64 * 1024, 0),
+            ("zstd", 64 * 1024, None), ("none", 64 * 1024, None))
+
+
+def _variant_name(compression: str, chunk_size: int, lz4_level: int | None) -> str:
+    level = "" if lz4_level is None else f"_level{lz4_level}"
+    return f"{compression}{level}_{chunk_size // 1024}KiB"
 
 
 def _session_rows(periods: int) -> dict:
@@ -81,7 +89,8 @@ def _session_rows(periods: int) -> dict:
 
 
 def _recorder_run(path: str | None, rows: dict, compression: str = "lz4", chunk_size: int = 64 * 1024,
-                  per_message: bool = False, finishes: list | None = None) -> float:
+                  per_message: bool = False, finishes: list | None = None,
+                  lz4_level: int | None = None) -> float:
     """Feeds a run's rows through a Recorder as the session does; path None: no log (the
     recorder's in-memory lists only); per_message: the lists, plus one write() per message
     instead of the batched write_many."""
@@ -91,8 +100,9 @@ def _recorder_run(path: str | None, rows: dict, compression: str = "lz4", chunk_
     rec = Recorder(rows["period_s"])
     log = None
     if path is not None:
+        levels = {} if lz4_level is None else {"lz4_level": lz4_level}
         log = McapLog(path, metadata={"bench": {"what": "mcap_logging"}}, chunk_size=chunk_size,
-                      compression=compression)
+                      compression=compression, **levels)
         if finishes is not None:
             finish = log._finish_chunk
 
@@ -251,11 +261,13 @@ def run(quick: bool = False) -> dict:
     finishes: list[float] = []
     with tempfile.TemporaryDirectory() as tmp:
         for r in range(repeats):
-            for compression, chunk_size in VARIANTS:
-                path = os.path.join(tmp, f"{compression}_{chunk_size}.mcap")
-                default = (compression, chunk_size) == VARIANTS[0]
-                times[(compression, chunk_size)].append(_recorder_run(
-                    path, rows, compression, chunk_size, False, finishes if default else None))
+            for variant in VARIANTS:
+                compression, chunk_size, lz4_level = variant
+                path = os.path.join(tmp, _variant_name(*variant) + ".mcap")
+                default = variant == VARIANTS[0]
+                times[variant].append(_recorder_run(
+                    path, rows, compression, chunk_size, False, finishes if default else None,
+                    lz4_level))
             times["per_message"].append(_recorder_run(os.path.join(tmp, "per_message.mcap"), rows,
                                                       per_message=True))
             times["no_log"].append(_recorder_run(None, rows))
@@ -263,13 +275,13 @@ def run(quick: bool = False) -> dict:
         no_log = statistics.median(times["no_log"])
         result["no_log_us_per_period"] = _stats([t / n * 1e6 for t in times["no_log"]])
         recorder_path = {}
-        for (compression, chunk_size) in VARIANTS:
-            path = os.path.join(tmp, f"{compression}_{chunk_size}.mcap")
+        for variant in VARIANTS:
+            path = os.path.join(tmp, _variant_name(*variant) + ".mcap")
             summary = log_summary(path)
             chunks = max(summary["chunk_count"], 1)
-            recorder_path[f"{compression}_{chunk_size // 1024}KiB"] = {
-                "us_per_period": _stats([t / n * 1e6 for t in times[(compression, chunk_size)]]),
-                "log_us_per_period": round((statistics.median(times[(compression, chunk_size)]) - no_log) / n * 1e6, 2),
+            recorder_path[_variant_name(*variant)] = {
+                "us_per_period": _stats([t / n * 1e6 for t in times[variant]]),
+                "log_us_per_period": round((statistics.median(times[variant]) - no_log) / n * 1e6, 2),
                 "file_bytes_per_simulated_s": round(os.path.getsize(path) / sim_s),
                 "chunks": summary["chunk_count"],
                 "simulated_ms_per_chunk": round(n / chunks * rows["period_s"] * 1e3, 2),
@@ -290,7 +302,7 @@ def run(quick: bool = False) -> dict:
             "over_recorder_path_ratio": round((statistics.median(times["sdk"]) - no_log)
                                               / (statistics.median(times[VARIANTS[0]]) - no_log), 2),
             "messages": sdk_summary["message_count"], "chunks": sdk_summary["chunk_count"]}
-        default_path = os.path.join(tmp, "lz4_65536.mcap")
+        default_path = os.path.join(tmp, _variant_name(*VARIANTS[0]) + ".mcap")
         reads, summaries = [], []
         for _ in range(repeats):
             t0 = time.perf_counter()
