@@ -102,6 +102,7 @@ class SerialLink(Link):
             self._fd = self._port.fileno() if not is_url else None
         except Exception:  # noqa: BLE001 - ports without a descriptor use pyserial's read
             self._fd = None
+        self._readable = [self._fd]   # select()'s read list, made once
         self._port_timeout = 0.0
         self._closed = False
 
@@ -113,21 +114,34 @@ class SerialLink(Link):
         self.send_bytes(data)
 
     def send_bytes(self, data: bytes) -> None:
-        """Writes raw bytes (fault injection: damaged or partial frames)."""
-        self._check_open()
+        """Writes raw bytes (fault injection: damaged or partial frames). On a file descriptor
+        a frame goes out in one write() call, the per-period path of stub-pty and real boards."""
+        if self._closed:
+            self._check_open()
+        fd = self._fd
         try:
-            if self._fd is not None:
-                self._write_fd(data)
+            if fd is not None:
+                try:
+                    n = os.write(fd, data)
+                except BlockingIOError:     # the line's buffer is full: wait for room below
+                    n = 0
+                if n != len(data):
+                    self._write_rest(data, n)
             else:
                 self._port.write(data)
         except LinkError:
             raise
         except Exception as exc:  # noqa: BLE001 - pyserial raises SerialException, OSError, ...
             raise LinkError(f"serial port '{self.url}': write failed: {exc}") from exc
-        self.tx_bytes += len(data)
+        size = len(data)
+        self.tx_bytes += size
         # tx_frames counts the non-empty frames written, whoever framed them (send, or a link
         # tap handing whole frames to send_bytes): one per 0x00 that closes a non-empty run.
-        if 0 in data:
+        if size and data.find(0) == size - 1:      # one whole frame (or a lone delimiter)
+            if size > 1 or self._open_frame:
+                self.tx_frames += 1
+            self._open_frame = False
+        elif 0 in data:
             parts = data.split(b"\x00")
             frames = sum(1 for p in parts[1:-1] if p) + (1 if parts[0] or self._open_frame else 0)
             self.tx_frames += frames
@@ -135,8 +149,9 @@ class SerialLink(Link):
         elif data:
             self._open_frame = True
 
-    def _write_fd(self, data: bytes) -> None:
-        view = memoryview(data)
+    def _write_rest(self, data: bytes, done: int) -> None:
+        """The rest of a write the line did not take at once, within the write timeout."""
+        view = memoryview(data)[done:]
         deadline = None
         while view:
             try:
@@ -174,24 +189,37 @@ class SerialLink(Link):
                     return None
 
     def read_bytes(self, timeout_s: float | None = 0.0) -> bytes:
-        """Raw bytes as they arrive, bypassing the decoder (benchmarks, fault-injection tests)."""
-        self._check_open()
-        data = self._read(timeout_s)
+        """Raw bytes as they arrive, bypassing the decoder (link taps, benchmarks, fault-injection
+        tests): what one read() returns once the line is readable, b'' after timeout_s."""
+        if self._closed:
+            self._check_open()
+        fd = self._fd
+        if fd is None:
+            data = self._read(timeout_s)
+        else:       # _read's descriptor path, written out: a link tap's per-period call
+            if not select.select(self._readable, (), (), timeout_s)[0]:
+                return b""
+            try:
+                data = os.read(fd, 4096)
+            except BlockingIOError:
+                return b""
+            except OSError as exc:
+                raise self._read_error(exc) from exc
+            if not data:
+                raise LinkError(f"serial port '{self.url}': the other end closed the line")
         self.rx_bytes += len(data)
         return data
 
     def _read(self, timeout_s: float | None) -> bytes:
         if self._fd is not None:
-            if not select.select([self._fd], [], [], timeout_s)[0]:
+            if not select.select(self._readable, (), (), timeout_s)[0]:
                 return b""
             try:
                 data = os.read(self._fd, 4096)
             except BlockingIOError:
                 return b""
             except OSError as exc:
-                if exc.errno == errno.EIO:  # the other side of a pseudo-terminal closed
-                    raise LinkError(f"serial port '{self.url}': the other end closed the line") from exc
-                raise LinkError(f"serial port '{self.url}': read failed: {exc}") from exc
+                raise self._read_error(exc) from exc
             if not data:
                 raise LinkError(f"serial port '{self.url}': the other end closed the line")
             return data
@@ -202,6 +230,11 @@ class SerialLink(Link):
             return self._port.read(max(1, self._port.in_waiting))
         except Exception as exc:  # noqa: BLE001
             raise LinkError(f"serial port '{self.url}': read failed: {exc}") from exc
+
+    def _read_error(self, exc: OSError) -> LinkError:
+        if exc.errno == errno.EIO:  # the other side of a pseudo-terminal closed
+            return LinkError(f"serial port '{self.url}': the other end closed the line")
+        return LinkError(f"serial port '{self.url}': read failed: {exc}")
 
     def _check_open(self) -> None:
         if self._closed:

@@ -121,6 +121,46 @@ def test_serial_link_survives_line_noise(pty):
     assert counters["framing_errors"] == 40  # each noise burst is one bad candidate frame
 
 
+def test_serial_send_bytes_counts_frames_however_written(pty):
+    """tx_frames counts the non-empty frames closed by a 0x00, whether a write carries one whole
+    frame, a lone delimiter, half a frame or several frames; the master gets every byte."""
+    with open_link(f"serial:{pty.path}") as link:
+        pty.release_slave()
+        writes = [b"\x00", b"\x03\x01\x02\x00", b"\x03\x01", b"\x02\x00", b"\x00",
+                  b"\x02\x01\x00\x00\x02\x07\x00", b"\x04", b"\x00\x02\x01\x00\x05"]
+        counts = []
+        for data in writes:
+            link.send_bytes(data)
+            counts.append(link.counters["tx_frames"])
+        assert counts == [0, 1, 1, 2, 2, 4, 4, 6]
+        assert link.counters["tx_bytes"] == sum(map(len, writes))
+        got = b""
+        while len(got) < sum(map(len, writes)):
+            got += os.read(pty.master, 4096)
+        assert got == b"".join(writes)
+
+
+def test_serial_send_bytes_larger_than_the_line_buffer(pty):
+    """A write the pseudo-terminal cannot take at once goes out in pieces as the far end reads;
+    nothing is lost or reordered."""
+    data = bytes(range(1, 256)) * 1200 + b"\x00"      # ~300 kB: far more than a pty holds
+    received = bytearray()
+
+    def reader():
+        while len(received) < len(data):
+            received.extend(os.read(pty.master, 65536))
+            time.sleep(0.001)
+
+    with open_link(f"serial:{pty.path}") as link:
+        pty.release_slave()
+        t = threading.Thread(target=reader, daemon=True)
+        t.start()
+        link.send_bytes(data)
+        t.join(10)
+        assert link.counters["tx_frames"] == 1
+    assert bytes(received) == data
+
+
 def test_recv_times_out_and_waits(pty):
     with open_link(f"serial:{pty.path}") as link:
         pty.release_slave()
