@@ -236,6 +236,29 @@ def test_stdio_session_and_eof():
     assert [m.gates for m in got if isinstance(m, Gates)] == [0, 0, 0]  # not enabled
 
 
+def test_stdio_non_blocking_input_waits_for_frames():
+    """The stub blocks in read() between frames; handed a non-blocking stdin (read() gives
+    EAGAIN) it waits in poll() instead, neither exiting nor losing the frames that come later."""
+    r, w = os.pipe()
+    os.set_blocking(r, False)
+    stub = subprocess.Popen([str(EXECUTABLE_PATH), "--stdio"], stdin=r, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE)
+    os.close(r)
+    try:
+        time.sleep(0.2)                     # the stub finds nothing to read yet
+        assert stub.poll() is None
+        enc = FrameEncoder()
+        os.write(w, enc.encode(Hello(1, 0, 0, 50_000, 0, b"")))
+        time.sleep(0.1)
+        os.write(w, b"".join(enc.encode(Sample(k, 2048, 2048, 2867, 0, 0)) for k in range(3)))
+    finally:
+        os.close(w)                         # end of file: the stub exits 0
+    out, err = stub.communicate(timeout=10)
+    assert stub.returncode == 0, err.decode()
+    got = StreamDecoder().feed(out)
+    assert [type(m).__name__ for m in got] == ["Hello", "Gates", "Telemetry", "Gates", "Gates"]
+
+
 def test_usage_errors_name_the_argument():
     r = subprocess.run([str(EXECUTABLE_PATH), "--can-base", "0x7F0", "--stdio"], capture_output=True, text=True)
     assert r.returncode == 2 and "--can-base 0x7F0" in r.stderr

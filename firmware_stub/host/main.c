@@ -5,8 +5,9 @@
  *   hil-stub --stdio                       protocol frames over stdin/stdout
  *   hil-stub --slcan PATH [--can-base ID]  CAN mapping carried by SLCAN over a serial device
  *
- * Blocks in poll() while idle; exits 0 on end of file, hang-up or SHUTDOWN,
- * 1 on an I/O error, 2 on a usage error.
+ * Blocks in read() while idle (in poll() if handed a non-blocking descriptor);
+ * exits 0 on end of file, hang-up or SHUTDOWN, 1 on an I/O error, 2 on a usage
+ * error.
  */
 #define _DEFAULT_SOURCE /* cfmakeraw */
 #include <errno.h>
@@ -141,18 +142,20 @@ static int serve(int in_fd, out_buffer *out, const char *in_name, int slcan_mode
     slcan_state sl;
     slcan_init(&sl);
     for (;;) {
-        struct pollfd p = {in_fd, POLLIN, 0};
-        int r = poll(&p, 1, -1);
-        if (r < 0) {
+        /* A blocking read waits for the next frame by itself: one system call a period, as
+         * the bare echo makes. poll() only where the descriptor does not block (a
+         * non-blocking stdin handed over by the caller reads EAGAIN). */
+        ssize_t n = read(in_fd, rx, sizeof rx);
+        if (n < 0) {
             if (errno == EINTR) {
                 continue;
             }
-            fprintf(stderr, "hil-stub: poll on %s: %s\n", in_name, strerror(errno));
-            return 1;
-        }
-        ssize_t n = read(in_fd, rx, sizeof rx);
-        if (n < 0) {
-            if (errno == EINTR || errno == EAGAIN) {
+            if (errno == EAGAIN) { /* EWOULDBLOCK on Linux */
+                struct pollfd p = {in_fd, POLLIN, 0};
+                if (poll(&p, 1, -1) < 0 && errno != EINTR) {
+                    fprintf(stderr, "hil-stub: poll on %s: %s\n", in_name, strerror(errno));
+                    return 1;
+                }
                 continue;
             }
             if (errno == EIO) {
