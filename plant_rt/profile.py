@@ -51,12 +51,16 @@ class TimingParams:
 
 @dataclass(frozen=True)
 class InitialState:
+    """The plant's state at t = 0."""
+
     speed_rad_s: float = param(0.0)     # mechanical
     theta_m_rad: float = param(0.0)     # currents start at zero
 
 
 @dataclass(frozen=True)
 class BenchProfile:
+    """A bench profile: every section of the YAML file, defaults filled in."""
+
     timing: TimingParams = field(default_factory=TimingParams)
     motor: MotorParams = field(default_factory=MotorParams)
     inverter: InverterParams = field(default_factory=InverterParams)

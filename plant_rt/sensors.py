@@ -56,6 +56,8 @@ class SensorSample(NamedTuple):
 
 @dataclass(frozen=True)
 class CurrentSensorParams:
+    """The two phase-current channels: transducer and ADC."""
+
     phases: str = param("ab", choices=tuple(PHASE_PAIRS))
     bits: int = param(12, ge=1, le=16)
     a_per_count: float = param(0.01220703125, gt=0)   # 25 A / 2048
@@ -66,6 +68,8 @@ class CurrentSensorParams:
 
 @dataclass(frozen=True)
 class VoltageSensorParams:
+    """The DC-link voltage channel: transducer and ADC."""
+
     bits: int = param(12, ge=1, le=16)
     v_per_count: float = param(0.0244140625, gt=0)    # 100 V / 4096
     offset_counts: float = param(0.0)
@@ -75,6 +79,8 @@ class VoltageSensorParams:
 
 @dataclass(frozen=True)
 class EncoderParams:
+    """The incremental encoder and its counter."""
+
     lines_per_rev: int = param(1024, ge=1)
     counter_bits: int = param(16, ge=2, le=32)
     offset_counts: int = param(0)
@@ -82,6 +88,8 @@ class EncoderParams:
 
 @dataclass(frozen=True)
 class SensorParams:
+    """The profile's sensors section."""
+
     current: CurrentSensorParams = field(default_factory=CurrentSensorParams)
     dc_voltage: VoltageSensorParams = field(default_factory=VoltageSensorParams)
     encoder: EncoderParams = field(default_factory=EncoderParams)

@@ -380,6 +380,8 @@ class Role:
 
 @dataclass
 class Measurement:
+    """What a check measured: the value in its unit, a message and details for the report."""
+
     value: float
     unit: str
     message: str = ""
@@ -419,6 +421,8 @@ class CheckContext:
 
 @dataclass(frozen=True)
 class CheckKind:
+    """A check `kind`: the signals it reads (roles), its arguments, how it measures and in which unit."""
+
     name: str
     roles: tuple[Role, ...]
     args: Mapping[str, ArgSpec]

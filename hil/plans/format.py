@@ -154,6 +154,8 @@ class Window:
 
 @dataclass(frozen=True, kw_only=True)
 class StepBase:
+    """What every step carries: its place in the plan and its line in the file."""
+
     index: int        # 0-based position in the plan
     line: int         # line of the step in the plan file
     kind: ClassVar[str] = ""
@@ -240,6 +242,8 @@ class DcLinkStep(StepBase):
 
 @dataclass(frozen=True, kw_only=True)
 class PlantParamStep(StepBase):
+    """Changes motor constants of the plant (a hotter winding); the board is not told."""
+
     kind: ClassVar[str] = "plant_param"
     params: tuple[tuple[str, float], ...]
 
@@ -257,6 +261,8 @@ class FaultStep(StepBase):
 
 @dataclass(frozen=True, kw_only=True)
 class RunStep(StepBase):
+    """Advances the session by duration_s of simulated time."""
+
     kind: ClassVar[str] = "run"
     duration_s: float
 
@@ -300,6 +306,8 @@ class WaitUntilStep(StepBase):
 
 @dataclass(frozen=True, kw_only=True)
 class MarkStep(StepBase):
+    """Names the current simulated time, for check windows."""
+
     kind: ClassVar[str] = "mark"
     name: str
 
@@ -352,6 +360,8 @@ class PlotSpec:
 
 @dataclass(frozen=True)
 class Plan:
+    """A validated plan: its steps in order, the profiles it runs on, link, mode and plots."""
+
     name: str
     description: str
     source_path: Path

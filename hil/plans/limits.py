@@ -25,6 +25,8 @@ COMPARISONS = ("inside", "outside")
 
 @dataclass(frozen=True)
 class Limits:
+    """A check's bounds in one unit, with an optional marginal band inside them."""
+
     unit: str
     low: float | None = None
     high: float | None = None

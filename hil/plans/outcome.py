@@ -85,6 +85,8 @@ class CheckResult:
 
 @dataclass(frozen=True)
 class StepResult:
+    """One step as it ran: outcome, line and simulated start and end."""
+
     index: int
     kind: str
     outcome: Outcome
@@ -107,6 +109,8 @@ class StepResult:
 
 @dataclass(frozen=True)
 class PlanResult:
+    """One plan run on one profile: its outcome, steps, checks and the run's record."""
+
     plan_name: str
     source: str
     outcome: Outcome

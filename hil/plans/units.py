@@ -24,6 +24,8 @@ class UnitError(ValueError):
 
 @dataclass(frozen=True)
 class Unit:
+    """A unit symbol, its physical dimension and its factor to SI."""
+
     symbol: str        # canonical spelling, as reports print it
     dimension: str     # e.g. "angular_velocity"; equal dimensions convert
     scale_to_si: float  # value_in_si = value * scale_to_si

@@ -60,6 +60,8 @@ def _label(kind: str, data: dict) -> str:
 
 @dataclass
 class _Kind:
+    """One kind of event: when it was last printed and what is held back since."""
+
     last_print: float
     label: str = ""
     held: int = 0

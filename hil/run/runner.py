@@ -185,6 +185,8 @@ def apply_load(session: BenchSession, stimuli: Stimuli, step: LoadStep) -> None:
 # --------------------------------------------------------------------------- running
 @dataclass
 class RunOptions:
+    """How run_plan runs a plan (run_plan's keyword arguments)."""
+
     link: str | None = None
     mode: str | None = None
     out_dir: Path | None = None
@@ -201,6 +203,8 @@ class RunOptions:
 
 @dataclass
 class _RunState:
+    """What a run has done so far: step results, checks reached and marks."""
+
     steps: list[StepResult] = field(default_factory=list)
     checks_reached: list[tuple[CheckStep, float]] = field(default_factory=list)
     marks: dict[str, float] = field(default_factory=lambda: {"start": 0.0})
