@@ -263,18 +263,22 @@ _KEYWORDS: dict[str, Callable[[Any, Any, dict], bool]] = {
 }
 
 
+_KNOWN = frozenset(_KEYWORDS) | _ANNOTATIONS
+
+
 def _accepts(schema: Any, v: Any) -> bool:
     if schema is True or schema is False:
         return schema
     if type(schema) is not dict or type(v) not in _PLAIN:
         raise _Undecided
+    # Every keyword known before any is evaluated: a False is then as certain as a True (a
+    # keyword modelled here never depends on one that is not, e.g. additionalProperties on
+    # patternProperties), which `not` and `oneOf` need.
+    if not schema.keys() <= _KNOWN:
+        raise _Undecided
     for key, arg in schema.items():
         test = _KEYWORDS.get(key)
-        if test is None:
-            if key in _ANNOTATIONS:
-                continue
-            raise _Undecided
-        if not test(arg, v, schema):
+        if test is not None and not test(arg, v, schema):
             return False
     return True
 

@@ -182,3 +182,14 @@ def test_hil_run_of_a_plan_without_faults_imports_neither_jsonschema_nor_protobu
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.splitlines()[-1] == "0 []"
     assert (tmp_path / "out" / "two-periods" / "log.mcap").stat().st_size > 0
+
+
+def test_a_keyword_it_does_not_model_leaves_the_whole_schema_undecided():
+    """additionalProperties means something else beside patternProperties: under `not`, a
+    False computed without it would turn into a wrong True."""
+    schema = {"not": {"type": "object", "additionalProperties": False,
+                      "patternProperties": {"^x": {}}}}
+    assert not _valid(schema, {"x1": 1})
+    with pytest.raises(_Undecided):
+        _accepts(schema, {"x1": 1})
+    assert not schema_accepts(schema, {"x1": 1})
