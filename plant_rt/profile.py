@@ -138,10 +138,9 @@ def load_profile(path: str | Path | None = None,
     return build_profile(data, _error_factory(doc, marks), doc.source, controller_names)
 
 
-
 # --------------------------------------------------------------------------- quick acceptance
 # jsonschema's import (referencing, attrs, its format checkers, the meta-schemas) is about a
-# fifth of a short `hil run`, and it runs on every profile and plan although nearly every
+# sixth of a short `hil run`, and it runs on every profile and plan although nearly every
 # document is valid. The walker below decides "valid" for the keywords and values these
 # schemas use, with jsonschema's semantics; anything else (an invalid document, a keyword or a
 # value it does not model) goes to jsonschema, which alone words the errors. So a valid
@@ -159,7 +158,7 @@ _ANNOTATIONS = frozenset({"title", "description", "default", "examples", "$comme
 
 
 def _is_number(v: Any) -> bool:
-    return (type(v) is int or type(v) is float)
+    return type(v) is int or type(v) is float      # a bool is not a number
 
 
 _TYPE_TESTS: dict[str, Callable[[Any], bool]] = {
