@@ -81,9 +81,10 @@ def _session_rows(periods: int) -> dict:
         # the messages as the session has them (the codec's Telemetry, which the recorder
         # takes in C) and the truth as the plant gives it (tuples of floats)
         telemetry = [Telemetry(*[int(v) for v in row[:5]], *row[5:].tolist()) for row in rec.telemetry_rows]
-        return {"periods": list(rec.periods), "truth": list(rec.truth_rows),
+        # as a session hands them to the recorder: truth tuples of floats, sensor integers
+        return {"periods": rec.periods.tolist(), "truth": [tuple(r) for r in rec.truth_rows.tolist()],
                 "sensors": [SimpleNamespace(adc_i1=a, adc_i2=b, adc_vdc=c, encoder=d, status=e)
-                            for a, b, c, d, e in rec.sensor_rows],
+                            for a, b, c, d, e in rec.sensor_rows.astype(np.int64).tolist()],
                 "telemetry": {int(m.period): m for m in telemetry}, "frames": dict(captures),
                 "period_s": s.period_s}
 
@@ -143,7 +144,7 @@ def _recorder_run(path: str | None, rows: dict, compression: str = "lz4", chunk_
             m = telemetry.get(k)
             if m is not None:
                 tele(m)
-        rec.flush_log()
+        rec.seal()
     if log is not None:
         log.close()
     return time.perf_counter() - t_start

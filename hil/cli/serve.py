@@ -95,10 +95,10 @@ class _StatusLine:
     def show(self, ran: int) -> None:
         now = time.monotonic()
         t0, n0 = self.last
-        if now - t0 < 0.5 or not self.session.recorder.truth_rows:
+        row = self.session.recorder.latest_row("truth")
+        if now - t0 < 0.5 or row is None:
             return
         self.last = (now, ran)
-        row = self.session.recorder.truth_rows[-1]
         f = self.index
         faults = f"faults 0x{self.session.fault_bits:x}" if self.session.fault_bits else "no faults"
         board = f", board FAULTs {len(self.session.faults)}" if self.session.faults else ""

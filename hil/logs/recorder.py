@@ -1,12 +1,12 @@
 """Keeps every period's plant truth, sensor values, telemetry and commands.
 
-In memory as plain lists (an append costs tens of nanoseconds; a TELEMETRY is kept as the
-message itself) for the checks at the end of a run; rows become float64 arrays a batch at a
-time, in one call of the C codec (protocol.ccodec.fields_into). In the MCAP log in batches: every
-`LOG_BATCH_PERIODS` periods the new rows go to the log at once
-(`FixedChannel.write_many`, numpy columns into the open chunk) instead of one
-Python call per message (cost per period: `python -m bench mcap_logging`). The log's crash bound grows by the
-batch: a SIGKILL loses the open chunk and at most the last 256 periods
+A period appends to plain lists (an append costs tens of nanoseconds; a TELEMETRY is kept as
+the message itself). Every `LOG_BATCH_PERIODS` periods the lists are sealed: each kind becomes a
+float64 block in one call of the C codec (protocol.ccodec.fields_into), the lists are emptied,
+and the run keeps the blocks for the checks at its end. With a log, the new blocks go to it at
+the same time (`FixedChannel.write_many`, numpy columns into the open chunk) instead of one
+Python call per message (cost per period: `python -m bench mcap_logging`). The log's crash
+bound grows by the batch: a SIGKILL loses the open chunk and at most the last 256 periods
 (12.8 ms at 50 us); flush() and close() write the batch first. Signals are
 aligned on the sample instant t_k = k * T: the plant truth recorded for period
 k is the state the sensors sampled, and the telemetry of period k is what the
@@ -78,6 +78,15 @@ def _log_times(periods, period_s: float) -> np.ndarray:
     return np.rint(np.asarray(periods, dtype=np.float64) * period_s * 1e9).astype(np.uint64)
 
 
+def _joined(blocks: list[np.ndarray], pending: np.ndarray, empty_shape: tuple,
+            dtype=np.float64) -> np.ndarray:
+    """The sealed blocks and this batch's rows as one array."""
+    parts = blocks + [pending] if len(pending) else blocks
+    if not parts:
+        return np.empty(empty_shape, dtype=dtype)
+    return parts[0].copy() if len(parts) == 1 else np.concatenate(parts)
+
+
 def unit_of(field: str) -> str:
     """Unit of a logged field, from the naming convention (units in names)."""
     for suffix, unit in (("_rad_s", "rad/s"), ("_rpm", "rpm"), ("_rad", "rad"), ("_wb", "Wb"),
@@ -94,16 +103,29 @@ def unit_of(field: str) -> str:
 
 
 class Recorder:
-    """Per-period rows, optionally mirrored to an McapLog."""
+    """Per-period rows, optionally mirrored to an McapLog.
+
+    A period appends to plain lists (the truth tuple, the sensor values, the TELEMETRY
+    message); every LOG_BATCH_PERIODS periods the lists are sealed into float64 blocks, one
+    C call per kind, and the new blocks go to the log. The run keeps blocks, not objects: 336
+    bytes a period instead of about 1.4 kB of tuples, floats and messages, which the garbage
+    collector would otherwise walk again and again and the run's end would free one by one.
+    """
 
     def __init__(self, period_s: float):
         self.period_s = period_s
-        self.periods: list[int] = []
-        self.truth_rows: list[tuple] = []
-        self.sensor_rows: list[tuple] = []
-        # TELEMETRY messages as they came: their rows are made by the C codec a batch at a
-        # time (telemetry_rows, flush_log), none per period
+        # this batch's rows, as they came (a TELEMETRY as the decoded message)
+        self._periods: list[int] = []
+        self._truth: list[tuple] = []
+        self._sensors: list[tuple] = []
         self._telemetry_msgs: list = []
+        # sealed batches: periods (int64), truth, sensors (period + SENSOR_FIELDS) and
+        # telemetry (period + TELEMETRY_FIELDS) rows, float64
+        self._period_blocks: list[np.ndarray] = []
+        self._truth_blocks: list[np.ndarray] = []
+        self._sensor_blocks: list[np.ndarray] = []
+        self._telemetry_blocks: list[np.ndarray] = []
+        self._sealed_periods = 0
         self.command_rows: list[tuple] = []
         # Step signals that change now and then (board fault code, injected faults):
         # name -> [(period, value)], held until the next change.
@@ -111,13 +133,13 @@ class Recorder:
         self._log = None
         self._truth_ch = self._sensor_ch = self._telemetry_ch = None
         self._frames_ch = None
-        self._logged_periods = 0        # rows of periods/truth/sensors already in the log
-        self._logged_telemetry = 0
         # hil.live.LiveStream (or anything with period(), telemetry_row() and `every`): every
         # `every`-th row goes to the live viewers too
         self.live = None
 
     def attach_log(self, log) -> None:
+        """Logs the periods from now on (what came before stays in memory only)."""
+        self.seal()
         self._log = log
         self._truth_ch = log.add_fixed_channel(
             "/plant/truth", "hil.PlantTruth", [(f, "double" if f == "t_s" else "float")
@@ -129,18 +151,16 @@ class Recorder:
             "/ctrl/telemetry", "hil.Telemetry",
             [("period", "fixed32")] + [(f, "fixed32" if i < 4 else "float")
                                        for i, f in enumerate(TELEMETRY_FIELDS)])
-        self._logged_periods = len(self.periods)
-        self._logged_telemetry = len(self._telemetry_msgs)
-        log.before_flush(self.flush_log)
+        log.before_flush(self.seal)
 
     def period(self, k: int, truth: tuple, sample) -> None:
-        periods = self.periods
+        periods = self._periods
         periods.append(k)
-        self.truth_rows.append(truth)
-        self.sensor_rows.append((sample.adc_i1, sample.adc_i2, sample.adc_vdc, sample.encoder,
-                                 sample.status))
-        if self._log is not None and len(periods) - self._logged_periods >= LOG_BATCH_PERIODS:
-            self.flush_log()
+        self._truth.append(truth)
+        self._sensors.append((sample.adc_i1, sample.adc_i2, sample.adc_vdc, sample.encoder,
+                              sample.status))
+        if len(periods) >= LOG_BATCH_PERIODS:
+            self.seal()
         live = self.live
         if live is not None and k % live.every == 0:
             live.period(k, truth, sample)
@@ -155,56 +175,98 @@ class Recorder:
     def telemetry_sink(self):
         """What takes the next TELEMETRY message: telemetry(), or the list's own append while
         no live viewer follows (a period loop binds it once per run_periods: one Python call
-        fewer a period)."""
+        fewer a period; the list is emptied in place when sealed, never replaced)."""
         return self.telemetry if self.live is not None else self._telemetry_msgs.append
+
+    def seal(self) -> None:
+        """This batch's rows become float64 blocks and, with a log, go to it (every
+        LOG_BATCH_PERIODS periods, and before the log flushes or closes)."""
+        log = self._log
+        if self._periods:
+            periods = np.array(self._periods, dtype=np.int64)
+            truth = _rows_array(self._truth, len(TRUTH_FIELDS))
+            sensors = np.empty((len(periods), 1 + len(SENSOR_FIELDS)), dtype=np.float64)
+            sensors[:, 0] = periods
+            sensors[:, 1:] = _rows_array(self._sensors, len(SENSOR_FIELDS))
+            for rows in (self._periods, self._truth, self._sensors):
+                rows.clear()
+            self._period_blocks.append(periods)
+            self._truth_blocks.append(truth)
+            self._sensor_blocks.append(sensors)
+            self._sealed_periods += len(periods)
+            if log is not None:
+                t_ns = _log_times(periods, self.period_s)
+                self._truth_ch.write_many(t_ns, truth)
+                self._sensor_ch.write_many(t_ns, sensors)
+        if self._telemetry_msgs:
+            rows = _telemetry_array(self._telemetry_msgs)
+            self._telemetry_msgs.clear()
+            self._telemetry_blocks.append(rows)
+            if log is not None:
+                self._telemetry_ch.write_many(_log_times(rows[:, 0], self.period_s), rows)
+
+    @property
+    def period_count(self) -> int:
+        """Periods recorded (since the last clear())."""
+        return self._sealed_periods + len(self._periods)
+
+    @property
+    def periods(self) -> np.ndarray:
+        """Every recorded period's number, int64, in order (made anew at each call)."""
+        return _joined(self._period_blocks, np.array(self._periods, dtype=np.int64), (0,), np.int64)
+
+    @property
+    def truth_rows(self) -> np.ndarray:
+        """(periods, TRUTH_FIELDS) float64 rows (made anew at each call; `latest_row` reads
+        the newest at no cost)."""
+        width = len(TRUTH_FIELDS)
+        return _joined(self._truth_blocks, _rows_array(self._truth, width), (0, width))
+
+    @property
+    def sensor_rows(self) -> np.ndarray:
+        """(periods, SENSOR_FIELDS) float64 rows (made anew at each call)."""
+        width = len(SENSOR_FIELDS)
+        return _joined([b[:, 1:] for b in self._sensor_blocks], _rows_array(self._sensors, width),
+                       (0, width))
 
     @property
     def telemetry_rows(self) -> np.ndarray:
         """(TELEMETRY messages, period + TELEMETRY_FIELDS) float64 rows in arrival order, made
         anew at each call (a run's worth: milliseconds; `latest` reads the newest value)."""
-        return _telemetry_array(self._telemetry_msgs)
+        return _joined(self._telemetry_blocks, _telemetry_array(self._telemetry_msgs),
+                       (0, 1 + len(TELEMETRY_FIELDS)))
+
+    def latest_row(self, group: str):
+        """The newest truth, sensors or telemetry row (telemetry's starts with the period),
+        None before the first: for readers that poll while a run goes on (no copy)."""
+        if group == "telemetry":
+            if self._telemetry_msgs:
+                return telemetry_row(self._telemetry_msgs[-1])
+            blocks = self._telemetry_blocks
+        elif group == "truth":
+            if self._truth:
+                return self._truth[-1]
+            blocks = self._truth_blocks
+        else:
+            if self._sensors:
+                return self._sensors[-1]
+            return self._sensor_blocks[-1][-1, 1:] if self._sensor_blocks else None
+        return blocks[-1][-1] if blocks else None
 
     def latest(self, group: str, index: int) -> float:
         """Value `index` of the newest truth, sensors or telemetry row (the row's order:
-        telemetry's starts with the period), NaN before the first: for readers that poll
-        while a run goes on, at no conversion cost."""
-        if group == "telemetry":
-            msgs = self._telemetry_msgs
-            return float(telemetry_row(msgs[-1])[index]) if msgs else math.nan
-        rows = self.truth_rows if group == "truth" else self.sensor_rows
-        return float(rows[-1][index]) if rows else math.nan
+        telemetry's starts with the period), NaN before the first."""
+        row = self.latest_row(group)
+        return math.nan if row is None else float(row[index])
 
     def clear(self) -> None:
         """Forgets the rows kept in memory (a long run that checks as it goes), after writing
         to the log the ones it does not have yet."""
-        self.flush_log()
-        for rows in (self.periods, self.truth_rows, self.sensor_rows, self._telemetry_msgs):
-            rows.clear()
-        self._logged_periods = self._logged_telemetry = 0
-
-    def flush_log(self) -> None:
-        """Writes the rows not yet in the log (every LOG_BATCH_PERIODS periods, and before
-        the log flushes or closes)."""
-        if self._log is None:
-            return
-        if len(self.periods) < self._logged_periods:
-            # the lists were emptied behind the recorder's back (use clear()): what they held
-            # and the log did not is gone; log from here on
-            self._logged_periods = len(self.periods)
-        a, b = self._logged_periods, len(self.periods)
-        if b > a:
-            t_ns = _log_times(self.periods[a:b], self.period_s)
-            self._truth_ch.write_many(t_ns, _rows_array(self.truth_rows[a:b], len(TRUTH_FIELDS)))
-            sensors = np.empty((b - a, 1 + len(SENSOR_FIELDS)), dtype=np.float64)
-            sensors[:, 0] = self.periods[a:b]
-            sensors[:, 1:] = _rows_array(self.sensor_rows[a:b], len(SENSOR_FIELDS))
-            self._sensor_ch.write_many(t_ns, sensors)
-            self._logged_periods = b
-        a, b = self._logged_telemetry, len(self._telemetry_msgs)
-        if b > a:
-            rows = _telemetry_array(self._telemetry_msgs[a:b])
-            self._telemetry_ch.write_many(_log_times(rows[:, 0], self.period_s), rows)
-            self._logged_telemetry = b
+        self.seal()
+        for blocks in (self._period_blocks, self._truth_blocks, self._sensor_blocks,
+                       self._telemetry_blocks):
+            blocks.clear()
+        self._sealed_periods = 0
 
     def command(self, k: int, row: tuple) -> None:
         self.command_rows.append((k, *row))
@@ -233,26 +295,26 @@ class Recorder:
     def arrays(self) -> dict[str, tuple[np.ndarray, np.ndarray, str]]:
         """name -> (t_s, values, unit) for every recorded signal."""
         out: dict[str, tuple[np.ndarray, np.ndarray, str]] = {}
-        if self.periods:
-            t = np.asarray(self.periods, dtype=np.float64) * self.period_s
-            truth = np.asarray(self.truth_rows, dtype=np.float64)
+        k = self.periods
+        if len(k):
+            t = k * self.period_s
+            truth = self.truth_rows
             for i, name in enumerate(TRUTH_FIELDS):
                 if name != "t_s":
                     out[f"plant.{name}"] = (t, truth[:, i], unit_of(name))
-            sensors = np.asarray(self.sensor_rows, dtype=np.float64)
+            sensors = self.sensor_rows
             for i, name in enumerate(SENSOR_FIELDS):
                 out[f"sensor.{name}"] = (t, sensors[:, i], "")
             # Commands are step signals: hold each value until the next command.
             if self.command_rows:
                 cmd = np.asarray(self.command_rows, dtype=np.float64)
-                idx = np.searchsorted(cmd[:, 0], np.asarray(self.periods), side="right") - 1
+                idx = np.searchsorted(cmd[:, 0], k, side="right") - 1
                 valid = idx >= 0
                 for i, name in enumerate(COMMAND_FIELDS):
-                    values = np.full(len(self.periods), np.nan)
+                    values = np.full(len(k), np.nan)
                     values[valid] = cmd[idx[valid], i + 1]
                     out[f"cmd.{name}"] = (t, values, unit_of(name))
             # Step signals on the period grid: 0 before their first change.
-            k = np.asarray(self.periods)
             for name, rows in self.step_rows.items():
                 values = np.zeros(len(k))
                 if rows:
@@ -260,8 +322,8 @@ class Recorder:
                     idx = np.searchsorted(at, k, side="right") - 1
                     values[idx >= 0] = np.asarray([r[1] for r in rows])[idx[idx >= 0]]
                 out[name] = (t, values, "")
-        if self._telemetry_msgs:
-            tel = self.telemetry_rows
+        tel = self.telemetry_rows
+        if len(tel):
             t_tel = tel[:, 0] * self.period_s
             for i, name in enumerate(TELEMETRY_FIELDS):
                 out[f"ctrl.{name}"] = (t_tel, tel[:, i + 1], unit_of(name))

@@ -704,7 +704,7 @@ class BenchSession:
     def _publish(self, mailbox, k: int) -> None:
         from hil.ports.modbus import PlantSnapshot, StateBit
 
-        truth = self.recorder.truth_rows[-1]
+        truth = self.recorder.latest_row("truth")
         f = _TRUTH_INDEX
         state = (StateBit.RUNNING if self.command_state.enable else 0) | \
             (StateBit.BOARD_FAULT if self.faults else 0) | \

@@ -66,12 +66,13 @@ class ClosedLoop:
         """Runs round(seconds / T) periods; the plant's truth of each (TRUTH_FIELDS names) and
         the board's telemetry of each (tm_<field>), one value per period."""
         rec = self.session.recorder
-        first = len(rec.periods)
-        k0 = rec.periods[-1] + 1 if rec.periods else self.plant.period
+        periods = rec.periods
+        first = len(periods)
+        k0 = int(periods[-1]) + 1 if first else self.plant.period
         n = int(round(seconds / self.period_s))
         self.session.run_periods(n)
         self.session.drain()                 # the last period's TELEMETRY
-        truth = np.asarray(rec.truth_rows[first:], dtype=np.float64)
+        truth = rec.truth_rows[first:]
         out = {name: truth[:, i] for i, name in enumerate(TRUTH_FIELDS)}
         tel = rec.telemetry_rows
         tel = tel[(tel[:, 0] >= k0) & (tel[:, 0] < k0 + n)]
