@@ -239,6 +239,13 @@ class LinkTap:
 
     def _take_in(self, data: bytes) -> None:
         buf = self._partial
+        if not buf and not self.faults and data[-1] == 0:
+            # whole frames and nothing before them (a board's one write of its answers): taken
+            # as they are, without the partial buffer's copies
+            self.captured["in"] += data
+            self.captured_frames["in"] += data.count(0)
+            self.inbox.extend(self._decoder.feed(data))
+            return
         buf += data
         end = buf.rfind(0)
         if end < 0:
@@ -262,16 +269,21 @@ class LinkTap:
         inbox = self.inbox
         if inbox:
             return inbox.popleft()
-        deadline = None if timeout_s is None else time.monotonic() + timeout_s
+        if timeout_s is None:
+            deadline = remaining = None
+        else:
+            remaining = max(0.0, timeout_s)
+            deadline = time.monotonic() + remaining
         while True:
-            remaining = None if deadline is None else max(0.0, deadline - time.monotonic())
             data = self.link.read_bytes(remaining)
             if data:
                 self._take_in(data)
                 if inbox:
                     return inbox.popleft()
-            if deadline is not None and time.monotonic() >= deadline:
-                return None
+            if deadline is not None:
+                remaining = deadline - time.monotonic()
+                if remaining <= 0.0:
+                    return None
 
     def take_capture(self) -> dict[str, tuple[bytes, int]]:
         counts = self._exchange_counts
