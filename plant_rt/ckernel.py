@@ -8,6 +8,10 @@ scripts/bootstrap.sh) does the work of the plant's slow paths in one call each:
     settle       the projection and turn-on check of Network.begin
     leg_period   plant_rt.plant.Plant._leg_period (a PWM period as constant-vector pieces,
                  with its sign check)
+    duty_period  Plant.step's DUTY period on that path in one call (Plant._duty_step):
+                 Command.parse, the switch windows (SwitchTimeline.switch_windows with its
+                 dead-time memory), leg_period and Plant._finish; None (nothing changed)
+                 hands the period back to the Python code
     sample       plant_rt.plant.Plant.sample with plant_rt.sensors.Sensors.read, the plain
                  case (no sensor fault, no open phase; None otherwise, and when a noise buffer
                  needs its refill: the plant then runs the Python code)
@@ -31,7 +35,7 @@ from pathlib import Path
 
 BUILD_DIR = Path(__file__).resolve().parent / "c" / "build"
 #: The interface this module speaks (the extension's ABI constant).
-ABI = 4
+ABI = 5
 
 
 def extension_path() -> Path:

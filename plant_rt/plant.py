@@ -156,6 +156,7 @@ class Plant:
         self.network.ckernel = kernel
         self._timeline.kernel = kernel
         self._bind_readout(kernel)
+        self._bind_duty_period()
 
     def _bind_readout(self, kernel) -> None:
         """sample() and truth() in the kernel when it has them (a kernel without, such as a
@@ -193,6 +194,19 @@ class Plant:
         # Every gate command is one interval: no dead time, and no delay that could split it.
         self._one_interval = (self.inverter.dead_time_s == 0.0
                               and self.profile.timing.computation_delay_s == 0.0)
+        self._bind_duty_period()
+
+    def _bind_duty_period(self) -> None:
+        """The DUTY fast path (the kernel's duty_period, None when there is none or the
+        leg-window path may not run) and its constants, after a change of either."""
+        kernel = self._ckernel
+        fn = getattr(kernel, "duty_period", None) if self._pwm_ok else None
+        self._duty_period = fn
+        if fn is not None:
+            m, inv, tl = self.motor, self.inverter, self._timeline
+            self._duty_cfg = tuple(float(v) for v in m._k + (
+                m.ld, 1.0 if m.spm else 0.0, tl.period_s, tl.delay_s, tl.dead_time_s,
+                inv.device_drop_v, inv.device_knee_a, self._h_max, STATUS_INDEX_PULSE))
 
     def _scale_vectors(self) -> None:
         """Table 2 voltages of every driven gate word at the present source voltage."""
@@ -225,6 +239,10 @@ class Plant:
     def step(self, gates: int | None = None, duty=None) -> None:
         """Integrates one control period with the new command (None keeps the previous one)."""
         old = self._cmd
+        if (gates is None and self._duty_period is not None
+                and (duty is not None or old.duty is not None)
+                and self._duty_step(old, old if duty is None else duty)):
+            return
         if duty is None and gates is None:
             new = old
         elif duty is None and type(gates) is int and 0 <= gates < 64:
@@ -269,6 +287,37 @@ class Plant:
         self._general(t0, old, new)
         self._finish(th, self._th)
 
+    def _duty_step(self, old: Command, new) -> bool:
+        """The DUTY fast path: step() for duties `new` (or the duty Command held) in one call
+        of the kernel's duty_period, which parses the duties, builds the switch windows (with
+        the dead-time memory) and runs _leg_period and _finish as the code below step() would;
+        False (nothing changed) when it does not take the period: step() then runs that code.
+        A period _leg_period refuses goes to the general network with the windows built."""
+        load = self.load
+        if load.locked or load.version != self._seg_key or self._seg_key != self._load_key:
+            return False
+        vdc = self.dc_link.source_v
+        done = self._duty_period(self._duty_cfg, Command, old.gates, old.duty, new,
+                                 self._timeline._rise, vdc, self._pa, self._pb, self._w, self._th,
+                                 self._revs, self.period, self._load_seg, self._bw)
+        if done is None:
+            return False
+        if len(done) == 2:
+            self._cmd, windows = done
+            self._flags = 0
+            th = self._th
+            self._intervals(self.period * self._T, self._timeline.words(windows))
+            self._finish(th, self._th)
+            return True
+        (self._cmd, self._pa, self._pb, self._w, self._th, self._u_int, self._idc_int,
+         self._flags, self._revs, self.period, h) = done
+        self._zero_current = False
+        self._vdc = vdc
+        if self._net_dirty:
+            self.network.set_driven(_LEG_STATES[_LEG_WORDS[h]])
+            self._net_dirty = False
+        return True
+
     def _refresh_load(self, t0: float) -> None:
         """Caches the load's linear piece at t0 for the fast path (none while locked)."""
         load = self.load
@@ -304,6 +353,11 @@ class Plant:
             intervals = tl.words(windows)
         else:
             intervals = tl.build(old, new)
+        self._intervals(t0, intervals)
+
+    def _intervals(self, t0: float, intervals: list[tuple[float, float, int]]) -> None:
+        """_general's integration of the period's constant-word intervals, one after the other."""
+        T = self._T
         net = self.network
         y = [self._pa, self._pb, self._w, self._th, self._vcap]
         acc = [0.0, 0.0, 0.0]

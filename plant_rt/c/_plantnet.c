@@ -16,6 +16,8 @@
  *               the sign check of Plant._signs_hold.
  *   advance     MotorModel.advance (the driven and diode intervals of the general path).
  *   duty_windows  SwitchTimeline._duty_windows (the switches' on-intervals of a duty command).
+ *   duty_period  Plant.step's DUTY period on the leg-window path in one call: Command.parse,
+ *               switch_windows (the dead-time memory included), leg_period, _finish.
  *   sample      Plant.sample with Sensors.read (the ADC codes with their noise draws, the
  *               encoder count, the status bits) in the plain case: no sensor fault, no open
  *               phase, no noise buffer to refill (None otherwise: the Python code runs).
@@ -1500,15 +1502,109 @@ static int rise_set(PyObject *rise, int j, int has, double r)
     return PyList_SetItem(rise, j, o); /* steals o */
 }
 
-static int append_window(PyObject *lst, double a, double b)
+/* SwitchTimeline._duty_windows on arrays: per switch j its on-intervals wins[j][0..nwin[j]-1]
+ * for the duties `duty` (no delay in play); the dead-time memory rise (has[j]: not None, r[j]:
+ * its value) is read and updated as the Python code does. */
+static void duty_windows_c(double T, double td, const double duty[3], int has[6], double r[6],
+                           double wins[6][MAX_WIN][2], int nwin[6])
 {
-    PyObject *w = Py_BuildValue("(dd)", a, b);
-    if (w == NULL) {
-        return -1;
+    for (int x = 0; x < 3; x++) {
+        double d = duty[x];
+        int jh = 2 * x, jl = 2 * x + 1;
+        double a;
+        nwin[jh] = 0;
+        nwin[jl] = 0;
+        if (d >= 1.0 || d <= 0.0) {
+            int jon = d >= 1.0 ? jh : jl, joff = d >= 1.0 ? jl : jh;
+            double rr = r[jon];
+            int hh = has[jon];
+            if (!hh) {
+                a = td;
+            } else {
+                double z = rr + td;
+                a = 0.0 > z ? 0.0 : z;
+            }
+            if (a < T) {
+                wins[jon][0][0] = a;
+                wins[jon][0][1] = T;
+                nwin[jon] = 1;
+            }
+            has[jon] = 1;
+            r[jon] = (hh ? rr : 0.0) - T;
+            has[joff] = 0;
+            r[joff] = 0.0;
+            continue;
+        }
+        double t_on = 0.5 * T * (1.0 - d);
+        double t_off = 0.5 * T * (1.0 + d);
+        a = t_on + td;
+        if (a < t_off) {
+            wins[jh][0][0] = a;
+            wins[jh][0][1] = t_off;
+            nwin[jh] = 1;
+        }
+        has[jh] = 0;
+        r[jh] = 0.0;
+        if (!has[jl]) {
+            a = td;
+        } else {
+            double z = r[jl] + td;
+            a = 0.0 > z ? 0.0 : z;
+        }
+        if (a < t_on) {
+            wins[jl][nwin[jl]][0] = a;
+            wins[jl][nwin[jl]][1] = t_on;
+            nwin[jl]++;
+        }
+        a = t_off + td;
+        if (a < T) {
+            wins[jl][nwin[jl]][0] = a;
+            wins[jl][nwin[jl]][1] = T;
+            nwin[jl]++;
+        }
+        has[jl] = 1;
+        r[jl] = t_off - T;
     }
-    int rc = PyList_Append(lst, w);
-    Py_DECREF(w);
-    return rc;
+}
+
+/* The six windows as Python builds them: a list of 6 lists of (on, off) tuples. */
+static PyObject *windows_list(double wins[6][MAX_WIN][2], const int nwin[6])
+{
+    PyObject *out = PyList_New(6);
+    if (out == NULL) {
+        return NULL;
+    }
+    for (int j = 0; j < 6; j++) {
+        PyObject *lst = PyList_New(nwin[j]);
+        if (lst == NULL) {
+            Py_DECREF(out);
+            return NULL;
+        }
+        PyList_SET_ITEM(out, j, lst);
+        for (int i = 0; i < nwin[j]; i++) {
+            PyObject *w = Py_BuildValue("(dd)", wins[j][i][0], wins[j][i][1]);
+            if (w == NULL) {
+                Py_DECREF(out);
+                return NULL;
+            }
+            PyList_SET_ITEM(lst, i, w);
+        }
+    }
+    return out;
+}
+
+/* Writes the dead-time memory back into the list rise (None or a float per switch). */
+static int rise_store(PyObject *rise, const int has[6], const double r[6])
+{
+    for (int j = 0; j < 6; j++) {
+        if (!has[j] && PyList_GET_ITEM(rise, j) == Py_None) {
+            continue;
+        }
+        if (rise_set(rise, j, has[j], r[j]) < 0) {
+            return -1;
+        }
+    }
+    return 0;
 }
 
 PyDoc_STRVAR(duty_windows_doc,
@@ -1534,73 +1630,20 @@ static PyObject *mod_duty_windows(PyObject *self, PyObject *const *args, Py_ssiz
         PyErr_SetString(PyExc_TypeError, "rise must be a list of 6 items");
         return NULL;
     }
-    PyObject *out = PyList_New(6);
-    if (out == NULL) {
-        return NULL;
-    }
+    int has[6], nwin[6];
+    double r[6], wins[6][MAX_WIN][2];
     for (int j = 0; j < 6; j++) {
-        PyObject *lst = PyList_New(0);
-        if (lst == NULL) {
-            Py_DECREF(out);
+        if (rise_get(rise, j, &has[j], &r[j]) < 0) {
             return NULL;
         }
-        PyList_SET_ITEM(out, j, lst);
     }
-    for (int x = 0; x < 3; x++) {
-        double d = duty[x];
-        int jh = 2 * x, jl = 2 * x + 1;
-        PyObject *hi = PyList_GET_ITEM(out, jh), *lo = PyList_GET_ITEM(out, jl);
-        int has;
-        double r, a;
-        if (d >= 1.0 || d <= 0.0) {
-            int jon = d >= 1.0 ? jh : jl, joff = d >= 1.0 ? jl : jh;
-            if (rise_get(rise, jon, &has, &r) < 0) {
-                goto fail;
-            }
-            if (!has) {
-                a = td;
-            } else {
-                double z = r + td;
-                a = 0.0 > z ? 0.0 : z;
-            }
-            if (a < T && append_window(d >= 1.0 ? hi : lo, a, T) < 0) {
-                goto fail;
-            }
-            if (rise_set(rise, jon, 1, (has ? r : 0.0) - T) < 0 || rise_set(rise, joff, 0, 0.0) < 0) {
-                goto fail;
-            }
-            continue;
-        }
-        double t_on = 0.5 * T * (1.0 - d);
-        double t_off = 0.5 * T * (1.0 + d);
-        a = t_on + td;
-        if (a < t_off && append_window(hi, a, t_off) < 0) {
-            goto fail;
-        }
-        if (rise_set(rise, jh, 0, 0.0) < 0 || rise_get(rise, jl, &has, &r) < 0) {
-            goto fail;
-        }
-        if (!has) {
-            a = td;
-        } else {
-            double z = r + td;
-            a = 0.0 > z ? 0.0 : z;
-        }
-        if (a < t_on && append_window(lo, a, t_on) < 0) {
-            goto fail;
-        }
-        a = t_off + td;
-        if (a < T && append_window(lo, a, T) < 0) {
-            goto fail;
-        }
-        if (rise_set(rise, jl, 1, t_off - T) < 0) {
-            goto fail;
-        }
+    duty_windows_c(T, td, duty, has, r, wins, nwin);
+    PyObject *out = windows_list(wins, nwin);
+    if (out == NULL || rise_store(rise, has, r) < 0) {
+        Py_XDECREF(out);
+        return NULL;
     }
     return out;
-fail:
-    Py_DECREF(out);
-    return NULL;
 }
 
 /* ------------------------------------------------------------------ sample and truth
@@ -1649,9 +1692,8 @@ static layout_t L_LOAD = {NULL, 0, {"locked", "_t", "_v", "kw", NULL, NULL, NULL
 
 /* 1 when obj's class is bound (binding it now if it is new), 0 when its attributes are not
  * all plain slots (no error set), -1 on an error. */
-static int bind(layout_t *lay, PyObject *obj)
+static int bind_type(layout_t *lay, PyTypeObject *tp)
 {
-    PyTypeObject *tp = Py_TYPE(obj);
     if (lay->type == tp) {
         return lay->ok;
     }
@@ -1685,6 +1727,11 @@ static int bind(layout_t *lay, PyObject *obj)
         memcpy(lay->off, off, sizeof off);
     }
     return ok;
+}
+
+static int bind(layout_t *lay, PyObject *obj)
+{
+    return bind_type(lay, Py_TYPE(obj));
 }
 
 /* A bound slot's value (borrowed; NULL when unset). */
@@ -2051,6 +2098,388 @@ python:
     Py_RETURN_NONE;
 }
 
+/* ------------------------------------------------------------------ a duty period in one call
+ *
+ * Plant.step's DUTY period on the leg-window path: SwitchTimeline.switch_windows (the dead-time
+ * memory included) and Plant._leg_period in one call, so that Python only stores the result.
+ * Every operation is the Python code's (and the kernel's duty_windows and leg_period), in the
+ * same order. */
+
+/* Command.edges(j, T) of a command given as its gate word (duty NULL) or its duties: the
+ * switch's state at 0+ in *state0, the number of toggle times (0 or 2) put in e. */
+static int cmd_edges(long gates, const double *duty, int j, double T, int *state0, double e[2])
+{
+    int leg = j / 2, low = j % 2;
+    if (duty == NULL) {
+        *state0 = (gates & LEG_BITS[leg][low]) != 0;
+        return 0;
+    }
+    double d = duty[leg];
+    if (d <= 0.0) {
+        *state0 = low;
+        return 0;
+    }
+    if (d >= 1.0) {
+        *state0 = !low;
+        return 0;
+    }
+    *state0 = low;
+    e[0] = 0.5 * T * (1.0 - d);
+    e[1] = 0.5 * T * (1.0 + d);
+    return 2;
+}
+
+/* SwitchTimeline.switch_windows' general loop (a computation delay splits the period between
+ * the old command and the new duty command). At most 5 toggles per switch, so at most 3
+ * windows. */
+static void switch_windows_c(double T, double delay_s, double td, long old_gates,
+                             const double *old_duty, const double duty[3], int has[6],
+                             double r[6], double wins[6][MAX_WIN][2], int nwin[6])
+{
+    double delay = T < delay_s ? T : delay_s;
+    for (int j = 0; j < 6; j++) {
+        double oe[2], ne[2], tog[8];
+        int s0, ns0, nt = 0, start;
+        int no = cmd_edges(old_gates, old_duty, j, T, &s0, oe);
+        int nn = cmd_edges(0, duty, j, T, &ns0, ne);
+        if (delay > 0.0) {
+            start = s0;
+            for (int i = 0; i < no; i++) {
+                if (oe[i] < delay) {
+                    tog[nt++] = oe[i];
+                }
+            }
+            int at_delay = s0 ^ (nt % 2 == 1);
+            int count = 0;
+            for (int i = 0; i < nn; i++) {
+                count += ne[i] <= delay;
+            }
+            int new_at_delay = ns0 ^ (count % 2 == 1);
+            if (delay < T && at_delay != new_at_delay) {
+                tog[nt++] = delay;
+            }
+            for (int i = 0; i < nn; i++) {
+                if (delay < ne[i] && ne[i] < T) {
+                    tog[nt++] = ne[i];
+                }
+            }
+        } else {
+            start = ns0;
+            for (int i = 0; i < nn; i++) {
+                tog[nt++] = ne[i];
+            }
+        }
+        /* _drop_glitches */
+        double min_width = 1e-9 * T, kept[8];
+        int nk = 0;
+        for (int i = 0; i < nt; i++) {
+            if (nk && tog[i] - kept[nk - 1] < min_width) {
+                nk--;
+            } else {
+                kept[nk++] = tog[i];
+            }
+        }
+        double iv[8][2], rise = 0.0;
+        int ni = 0, on = start;
+        if (start) {
+            rise = has[j] ? r[j] : 0.0;
+        }
+        for (int i = 0; i < nk; i++) {
+            if (on) {
+                iv[ni][0] = rise;
+                iv[ni][1] = kept[i];
+                ni++;
+            } else {
+                rise = kept[i];
+            }
+            on = !on;
+        }
+        if (on) {
+            iv[ni][0] = rise;
+            iv[ni][1] = T;
+            ni++;
+            has[j] = 1;
+            r[j] = rise - T;
+        } else {
+            has[j] = 0;
+            r[j] = 0.0;
+        }
+        nwin[j] = 0;
+        for (int i = 0; i < ni; i++) {
+            double a = iv[i][0] + td;
+            a = 0.0 > a ? 0.0 : a;
+            if (a < iv[i][1]) {
+                wins[j][nwin[j]][0] = a;
+                wins[j][nwin[j]][1] = iv[i][1];
+                nwin[j]++;
+            }
+        }
+    }
+}
+
+/* An exact float's value: 1 with *out set, else 0 (no error set). */
+static inline int exact_float(PyObject *o, double *out)
+{
+    if (!PyFloat_CheckExact(o)) {
+        return 0;
+    }
+    *out = PyFloat_AS_DOUBLE(o);
+    return 1;
+}
+
+/* n exact floats of a tuple: 1 with out set, else 0 (no error set). */
+static int exact_floats(PyObject *tup, double *out, Py_ssize_t n)
+{
+    if (!PyTuple_CheckExact(tup) || PyTuple_GET_SIZE(tup) != n) {
+        return 0;
+    }
+    for (Py_ssize_t i = 0; i < n; i++) {
+        if (!exact_float(PyTuple_GET_ITEM(tup, i), &out[i])) {
+            return 0;
+        }
+    }
+    return 1;
+}
+
+/* The duties of a new command: a Command (of the class bound in L_COMMAND) as it is, or a
+ * tuple or list of three exact floats in [0, 1] (Command.parse's check). 1 with duty set and
+ * *tup the tuple to keep (a new reference), 0 when Python must parse it (no error set), -1 on
+ * an error. */
+enum { CM_GATES, CM_DUTY };
+static layout_t L_COMMAND = {NULL, 0, {"gates", "duty", NULL, NULL, NULL, NULL, NULL, NULL}, {0}};
+
+static int new_duties(PyObject *arg, PyObject **tup, double duty[3])
+{
+    PyObject *seq = arg;
+    if (Py_TYPE(arg) == L_COMMAND.type) {
+        seq = slot(&L_COMMAND, arg, CM_DUTY);
+        if (seq == NULL || !PyTuple_CheckExact(seq)) {
+            return 0;
+        }
+    } else if (!PyTuple_CheckExact(seq) && !PyList_CheckExact(seq)) {
+        return 0;
+    }
+    if (PySequence_Fast_GET_SIZE(seq) != 3) {
+        return 0;
+    }
+    PyObject **items = PySequence_Fast_ITEMS(seq);
+    for (int x = 0; x < 3; x++) {
+        if (!exact_float(items[x], &duty[x]) || !(0.0 <= duty[x] && duty[x] <= 1.0)) {
+            return 0;
+        }
+    }
+    if (PyTuple_CheckExact(seq)) {
+        Py_INCREF(seq);
+        *tup = seq;
+        return 1;
+    }
+    *tup = PyList_AsTuple(seq);
+    return *tup == NULL ? -1 : 1;
+}
+
+/* A Command(duty=tup) of the bound class (its __init__ only sets the two slots), or `given`
+ * when the new command was one already. New reference. */
+static PyObject *duty_command(PyObject *given, PyObject *tup)
+{
+    if (Py_TYPE(given) == L_COMMAND.type) {
+        Py_INCREF(given);
+        return given;
+    }
+    PyTypeObject *tp = L_COMMAND.type;
+    PyObject *cmd = tp->tp_alloc(tp, 0);
+    if (cmd == NULL) {
+        return NULL;
+    }
+    PyObject **gates = (PyObject **)((char *)cmd + L_COMMAND.off[CM_GATES]);
+    PyObject **duty = (PyObject **)((char *)cmd + L_COMMAND.off[CM_DUTY]);
+    Py_INCREF(Py_None);
+    *gates = Py_None;
+    Py_INCREF(tup);
+    *duty = tup;
+    return cmd;
+}
+
+#define NDUTY_CFG 17
+
+PyDoc_STRVAR(duty_period_doc,
+"duty_period(cfg, command_type, old_gates, old_duty, new, rise, vdc, pa, pb, w, th, revs,\n"
+"            period, load_seg, bw)\n"
+"    -> None | (command, windows)\n"
+"       | (command, pa, pb, w, th, (u_alpha_int, u_beta_int), idc_int, flags, revs, period, h)\n\n"
+"Plant.step's period for a duty command on the leg-window path in one call: Command.parse\n"
+"(new: the duties, or the Command held), SwitchTimeline.switch_windows (old command: gate word\n"
+"old_gates, or duties old_duty) with the dead-time memory rise (updated in place),\n"
+"Plant._leg_period (the kernel's leg_period) and Plant._finish (index pulse, angle wrap,\n"
+"revolutions, period count). cfg: motor constants (MotorModel._k, 8), ld, spm (0 or 1), T,\n"
+"computation delay, dead time, device drop, knee, h_max, the index pulse's status bit.\n"
+"load_seg: Plant._load_seg (t, v0, slope, next knot). command_type: the Command class.\n"
+"Returns None with nothing changed when the call does not take the period (duties Python\n"
+"must parse or refuse, the load cache not covering the period start, a load knot in the\n"
+"period, an argument that is not an exact float, more edges than held): the Python code\n"
+"then runs. (command, windows), rise updated, when _leg_period refuses the period (the\n"
+"general network takes those windows). Else the new command and the period's end state.");
+
+static PyObject *mod_duty_period(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    (void)self;
+    if (nargs != 15) {
+        PyErr_SetString(PyExc_TypeError, "duty_period takes 15 arguments");
+        return NULL;
+    }
+    double c[NDUTY_CFG], duty[3], old_duty[3], seg[4], vdc, st[4], bw;
+    long old_gates = 0;
+    const double *od = NULL;
+    PyObject *rise = args[5];
+    if (!PyType_Check(args[1])) {
+        PyErr_SetString(PyExc_TypeError, "duty_period: command_type must be a class");
+        return NULL;
+    }
+    int bound = bind_type(&L_COMMAND, (PyTypeObject *)args[1]);
+    if (bound <= 0) {
+        return bound < 0 ? NULL : Py_NewRef(Py_None);
+    }
+    if (!exact_floats(args[0], c, NDUTY_CFG) || !exact_floats(args[13], seg, 4) ||
+        !exact_float(args[6], &vdc) || !exact_float(args[7], &st[0]) ||
+        !exact_float(args[8], &st[1]) || !exact_float(args[9], &st[2]) ||
+        !exact_float(args[10], &st[3]) || !exact_float(args[14], &bw) ||
+        !PyList_CheckExact(rise) || PyList_GET_SIZE(rise) != 6) {
+        Py_RETURN_NONE;
+    }
+    long long revs, period;
+    if (!int_in(args[11], -(long long)EXACT_INT_LIMIT, (long long)EXACT_INT_LIMIT, &revs) ||
+        !int_in(args[12], 0, (long long)EXACT_INT_LIMIT, &period)) {
+        Py_RETURN_NONE;
+    }
+    if (args[3] != Py_None) {
+        if (!exact_floats(args[3], old_duty, 3)) {
+            Py_RETURN_NONE;
+        }
+        od = old_duty;
+    } else {
+        long long g;
+        if (!int_in(args[2], 0, 0x3F, &g)) {
+            Py_RETURN_NONE;
+        }
+        old_gates = (long)g;
+    }
+    int has[6];
+    double r[6];
+    for (int j = 0; j < 6; j++) {
+        PyObject *o = PyList_GET_ITEM(rise, j);
+        has[j] = o != Py_None;
+        r[j] = 0.0;
+        if (has[j] && !exact_float(o, &r[j])) {
+            Py_RETURN_NONE;
+        }
+    }
+    cfg_t m;
+    memset(&m, 0, sizeof m);
+    m.p = c[0];
+    m.r = c[1];
+    m.psim = c[2];
+    m.ild = c[3];
+    m.ilq = c[4];
+    m.ij = c[5];
+    m.b = c[6];
+    m.kt = c[7];
+    double ld = c[8], T = c[10], delay_s = c[11], td = c[12], ud = c[13], knee = c[14];
+    double h_max = c[15];
+    int spm = c[9] != 0.0;
+    long pulse_bit = (long)c[16];
+    /* Plant.step: t0 = period * T (the int converted exactly: period < 2^52) */
+    double t0 = (double)period * T;
+    /* Plant._load_segment(t0) from its cache (a miss: None, Python refreshes it), then
+     * _leg_period's refusal of a load knot inside the period (None: Python refuses it). */
+    double seg_t = seg[0], t_next = seg[3];
+    if (!(seg_t <= t0 && t0 < t_next)) {
+        Py_RETURN_NONE;
+    }
+    double v0 = seg[1] + seg[2] * (t0 - seg_t);
+    double slope = seg[2];
+    if (t_next < t0 + T) {
+        Py_RETURN_NONE;
+    }
+    PyObject *tup = NULL;
+    int parsed = new_duties(args[4], &tup, duty);
+    if (parsed <= 0) {
+        return parsed < 0 ? NULL : Py_NewRef(Py_None);
+    }
+    /* SwitchTimeline.switch_windows (Command.__eq__ of the old and the new duty command) */
+    int same = od != NULL && od[0] == duty[0] && od[1] == duty[1] && od[2] == duty[2];
+    double wins[6][MAX_WIN][2];
+    int nwin[6];
+    if (delay_s == 0.0 || same) {
+        duty_windows_c(T, td, duty, has, r, wins, nwin);
+    } else {
+        switch_windows_c(T, delay_s, td, old_gates, od, duty, has, r, wins, nwin);
+    }
+    double th0 = st[3], out[3];
+    int h_end = 0;
+    int done = leg_period(&m, ld, spm, T, wins, nwin, ud, knee, vdc, st, h_max, v0, slope, bw,
+                          out, &h_end);
+    if (done < 0) {
+        Py_DECREF(tup);
+        Py_RETURN_NONE;     /* the rise memory is untouched: Python does it all again */
+    }
+    PyObject *cmd = duty_command(args[4], tup);
+    Py_DECREF(tup);
+    if (cmd == NULL || rise_store(rise, has, r) < 0) {
+        Py_XDECREF(cmd);
+        return NULL;
+    }
+    if (done == 0) {
+        PyObject *w = windows_list(wins, nwin);
+        if (w == NULL) {
+            Py_DECREF(cmd);
+            return NULL;
+        }
+        return Py_BuildValue("(NN)", cmd, w);
+    }
+    /* Plant._finish */
+    double th = st[3];
+    long flags = 0;
+    if ((th0 >= 0.0) != (th >= 0.0)) {
+        flags |= pulse_bit;
+    }
+    if (th > PI_) {
+        th -= TWO_PI;
+        revs += 1;
+    } else if (th <= -PI_) {
+        th += TWO_PI;
+        revs -= 1;
+    }
+    /* (command, pa, pb, w, th, (u_alpha_int, u_beta_int), idc_int, flags, revs, period, h),
+     * built item by item (Py_BuildValue's format parsing costs as much as the rest) */
+    PyObject *res = PyTuple_New(11), *u = PyTuple_New(2);
+    if (res == NULL || u == NULL) {
+        Py_XDECREF(res);
+        Py_XDECREF(u);
+        Py_DECREF(cmd);
+        return NULL;
+    }
+    PyTuple_SET_ITEM(res, 0, cmd);
+    PyTuple_SET_ITEM(u, 0, PyFloat_FromDouble(out[0]));
+    PyTuple_SET_ITEM(u, 1, PyFloat_FromDouble(out[1]));
+    PyTuple_SET_ITEM(res, 5, u);
+    PyTuple_SET_ITEM(res, 1, PyFloat_FromDouble(st[0]));
+    PyTuple_SET_ITEM(res, 2, PyFloat_FromDouble(st[1]));
+    PyTuple_SET_ITEM(res, 3, PyFloat_FromDouble(st[2]));
+    PyTuple_SET_ITEM(res, 4, PyFloat_FromDouble(th));
+    PyTuple_SET_ITEM(res, 6, PyFloat_FromDouble(out[2]));
+    PyTuple_SET_ITEM(res, 7, PyLong_FromLong(flags));
+    PyTuple_SET_ITEM(res, 8, PyLong_FromLongLong(revs));
+    PyTuple_SET_ITEM(res, 9, PyLong_FromLongLong(period + 1));
+    PyTuple_SET_ITEM(res, 10, PyLong_FromLong(h_end));
+    for (int i = 1; i < 11; i++) {
+        if (PyTuple_GET_ITEM(res, i) == NULL || (i == 5 && (PyTuple_GET_ITEM(u, 0) == NULL ||
+                                                            PyTuple_GET_ITEM(u, 1) == NULL))) {
+            Py_DECREF(res);     /* tuples with NULL items are freed safely */
+            return NULL;
+        }
+    }
+    return res;
+}
+
 static PyMethodDef methods[] = {
     {"integrate", (PyCFunction)(void (*)(void))mod_integrate, METH_FASTCALL, integrate_doc},
     {"settle", (PyCFunction)(void (*)(void))mod_settle, METH_FASTCALL, settle_doc},
@@ -2058,6 +2487,7 @@ static PyMethodDef methods[] = {
     {"advance", (PyCFunction)(void (*)(void))mod_advance, METH_FASTCALL, advance_doc},
     {"period", (PyCFunction)(void (*)(void))mod_period, METH_FASTCALL, period_doc},
     {"duty_windows", (PyCFunction)(void (*)(void))mod_duty_windows, METH_FASTCALL, duty_windows_doc},
+    {"duty_period", (PyCFunction)(void (*)(void))mod_duty_period, METH_FASTCALL, duty_period_doc},
     {"sample", (PyCFunction)(void (*)(void))mod_sample, METH_FASTCALL, sample_doc},
     {"truth", (PyCFunction)(void (*)(void))mod_truth, METH_FASTCALL, truth_doc},
     {NULL, NULL, 0, NULL},
@@ -2108,7 +2538,7 @@ PyMODINIT_FUNC PyInit__plantnet(void)
         return NULL;
     }
     /* The kernel's interface version: plant_rt/ckernel.py refuses a build of another one. */
-    if (PyModule_AddIntConstant(mod, "ABI", 4) < 0) {
+    if (PyModule_AddIntConstant(mod, "ABI", 5) < 0) {
         Py_DECREF(mod);
         return NULL;
     }
