@@ -176,9 +176,8 @@ class SerialLink(Link):
         deadline = None if timeout_s is None else time.monotonic() + timeout_s
         remaining = timeout_s
         while True:
-            data = self._read(remaining)
+            data = self.read_bytes(remaining)
             if data:
-                self.rx_bytes += len(data)
                 msgs = self._decoder.feed(data)
                 if msgs:
                     inbox.extend(msgs)
@@ -195,8 +194,8 @@ class SerialLink(Link):
             self._check_open()
         fd = self._fd
         if fd is None:
-            data = self._read(timeout_s)
-        else:       # _read's descriptor path, written out: a link tap's per-period call
+            data = self._read_port(timeout_s)
+        else:       # a descriptor (device, pty) read directly: a link tap's per-period call
             if not select.select(self._readable, (), (), timeout_s)[0]:
                 return b""
             try:
@@ -210,19 +209,8 @@ class SerialLink(Link):
         self.rx_bytes += len(data)
         return data
 
-    def _read(self, timeout_s: float | None) -> bytes:
-        if self._fd is not None:
-            if not select.select(self._readable, (), (), timeout_s)[0]:
-                return b""
-            try:
-                data = os.read(self._fd, 4096)
-            except BlockingIOError:
-                return b""
-            except OSError as exc:
-                raise self._read_error(exc) from exc
-            if not data:
-                raise LinkError(f"serial port '{self.url}': the other end closed the line")
-            return data
+    def _read_port(self, timeout_s: float | None) -> bytes:
+        """What pyserial's port has, once something is there or after timeout_s."""
         try:
             if timeout_s != self._port_timeout:
                 self._port.timeout = timeout_s
