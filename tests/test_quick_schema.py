@@ -1,4 +1,4 @@
-"""The quick acceptance check (plant_rt.profile.schema_accepts) that lets a valid plan or
+"""The quick acceptance check (configfile.schema.schema_accepts) that lets a valid plan or
 profile load without importing jsonschema: it must never accept what jsonschema rejects, and
 it must accept every valid document of the repository (else the fast path is silently lost).
 Invalid documents still go to jsonschema, so their errors are the ones tests/test_plan_format.py
@@ -19,7 +19,8 @@ from hil.faults.catalog import FAULTS
 from hil.plans.format import CHECK_SCHEMAS, LOAD_SCHEMAS, PLAN_SCHEMA, PLOT_SCHEMA, STEP_SCHEMAS
 from hil.session.policy import SESSION_SCHEMA
 from configfile.schema import nullable
-from plant_rt.profile import _accepts, _Undecided, profile_schema, schema_accepts
+from configfile.schema import _accepts, _Undecided, schema_accepts
+from plant_rt.profile import profile_schema
 
 REPO = Path(__file__).resolve().parents[1]
 

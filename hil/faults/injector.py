@@ -25,7 +25,7 @@ from typing import Any, Callable, Mapping
 
 from hil.session.link_tap import LinkFault
 from hil.faults.catalog import FAULTS
-from plant_rt.profile import schema_accepts
+from configfile.schema import schema_accepts
 
 #: Modbus ``fault_injection`` bit -> (fault, arguments used when switched from Modbus).
 #: A bit written 1 injects the fault (replacing an instance of it switched from elsewhere);

@@ -30,7 +30,6 @@ from configfile.schema import (BOOLEAN, FRACTION, NAME, NON_NEGATIVE, NUMBER, PO
                                SchemaChecker, obj, python_type)
 from configfile.source import ConfigError, KeyPath, YamlDocument, load_yaml, parse_yaml
 from hil.faults.catalog import FAULTS, PLANT_PARAMS
-from plant_rt.profile import QuickSchemaChecker
 
 # Board parameters a plan may PARAM_SET: protocol/c/hil_proto.h's hil_param_id
 # names, lower case without the HIL_PARAM_ prefix (control_step_cycles is read-only).
@@ -531,7 +530,7 @@ def plan_files(paths: Iterable[str | Path]) -> list[Path]:
 
 def _build(doc: YamlDocument, path: Path) -> Plan:
     # jsonschema only for a plan the quick check does not accept (plant_rt.profile)
-    v = QuickSchemaChecker(doc, {LINK_PATTERN: "stub, stub-pty, stub-can, qemu, serial:PORT or can:INTERFACE:CHANNEL"})
+    v = SchemaChecker(doc, {LINK_PATTERN: "stub, stub-pty, stub-can, qemu, serial:PORT or can:INTERFACE:CHANNEL"})
     data = doc.data
     if not isinstance(data, dict):
         raise doc.error((), f"a plan is a mapping with at least 'name' and 'steps', got {python_type(data)}")
