@@ -203,7 +203,9 @@ class SerialLink(Link):
             except BlockingIOError:
                 return b""
             except OSError as exc:
-                raise self._read_error(exc) from exc
+                if exc.errno == errno.EIO:  # the other side of a pseudo-terminal closed
+                    raise LinkError(f"serial port '{self.url}': the other end closed the line") from exc
+                raise LinkError(f"serial port '{self.url}': read failed: {exc}") from exc
             if not data:
                 raise LinkError(f"serial port '{self.url}': the other end closed the line")
         self.rx_bytes += len(data)
@@ -218,11 +220,6 @@ class SerialLink(Link):
             return self._port.read(max(1, self._port.in_waiting))
         except Exception as exc:  # noqa: BLE001
             raise LinkError(f"serial port '{self.url}': read failed: {exc}") from exc
-
-    def _read_error(self, exc: OSError) -> LinkError:
-        if exc.errno == errno.EIO:  # the other side of a pseudo-terminal closed
-            return LinkError(f"serial port '{self.url}': the other end closed the line")
-        return LinkError(f"serial port '{self.url}': read failed: {exc}")
 
     def _check_open(self) -> None:
         if self._closed:

@@ -125,7 +125,6 @@ class Recorder:
         self._truth_blocks: list[np.ndarray] = []
         self._sensor_blocks: list[np.ndarray] = []
         self._telemetry_blocks: list[np.ndarray] = []
-        self._sealed_periods = 0
         self.command_rows: list[tuple] = []
         # Step signals that change now and then (board fault code, injected faults):
         # name -> [(period, value)], held until the next change.
@@ -193,7 +192,6 @@ class Recorder:
             self._period_blocks.append(periods)
             self._truth_blocks.append(truth)
             self._sensor_blocks.append(sensors)
-            self._sealed_periods += len(periods)
             if log is not None:
                 t_ns = _log_times(periods, self.period_s)
                 self._truth_ch.write_many(t_ns, truth)
@@ -208,7 +206,7 @@ class Recorder:
     @property
     def period_count(self) -> int:
         """Periods recorded (since the last clear())."""
-        return self._sealed_periods + len(self._periods)
+        return sum(map(len, self._period_blocks)) + len(self._periods)
 
     @property
     def periods(self) -> np.ndarray:
@@ -266,7 +264,6 @@ class Recorder:
         for blocks in (self._period_blocks, self._truth_blocks, self._sensor_blocks,
                        self._telemetry_blocks):
             blocks.clear()
-        self._sealed_periods = 0
 
     def command(self, k: int, row: tuple) -> None:
         self.command_rows.append((k, *row))

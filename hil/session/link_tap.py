@@ -239,19 +239,17 @@ class LinkTap:
 
     def _take_in(self, data: bytes) -> None:
         buf = self._partial
-        if not buf and not self.faults and data[-1] == 0:
+        if buf or data[-1] != 0:
+            buf += data
+            end = buf.rfind(0)
+            if end < 0:
+                return
+            complete = bytes(buf[: end + 1])
+            del buf[: end + 1]
+        else:
             # whole frames and nothing before them (a board's one write of its answers): taken
             # as they are, without the partial buffer's copies
-            self.captured["in"] += data
-            self.captured_frames["in"] += data.count(0)
-            self.inbox.extend(self._decoder.feed(data))
-            return
-        buf += data
-        end = buf.rfind(0)
-        if end < 0:
-            return
-        complete = bytes(buf[: end + 1])
-        del buf[: end + 1]
+            complete = data
         if not self.faults:
             # every complete frame of the chunk at once: captured, counted by its delimiter,
             # decoded in one call
