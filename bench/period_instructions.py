@@ -6,16 +6,18 @@ the stub's switch words), each the difference of two runs of bench._period_worke
 only in the number of periods (start-up, handshake and warm-up cancel). The logged period is
 then split into the C functions that do its work, by their inclusive counts:
 
-- ``exchange``: the C period exchange (protocol.ccodec.exchange_sample), of which
-  ``firmware`` is the stub itself (hil_fw_exchange: its decoder, control law and encoder) and
-  ``decode_answers`` is the bench's decoding of GATES and TELEMETRY into message objects;
+- ``exchange``: SAMPLE encoded, handed to the stub and its answers decoded, in C (the period
+  loop's loop_exchange, or exchange_sample for a period the loop hands back), of which
+  ``firmware`` is the stub itself (hil_fw_exchange: its decoder, control law and encoder);
+- ``answer_objects``: the TELEMETRY message objects the recorder keeps (message_object);
 - ``plant_kernel``: the plant's C sample, truth and RK4 (plant_rt/c/_plantnet.c);
 - ``log_rows``: the batch conversion of rows to float64 (protocol.ccodec.fields_into);
 - ``lz4`` and ``crc32``: the MCAP chunks' compression and checksums;
 - ``python_and_objects``: the rest: the interpreter running the period loop, the plant's and
   recorder's Python, object allocation, the MCAP writer's Python.
 
-The last is what a period loop in C would remove (with most of ``decode_answers``).
+Since the C period loop (protocol.ccodec.exchange_periods) the last is mostly the plant's
+Python (sample, truth, step) and the MCAP writer's.
 ``stub+log, lz4 level 0`` is the logged period with the chunks compressed at the lz4
 library's default level instead of the writer's (hil.logs.mcap_writer.LZ4_LEVEL).
 """
@@ -34,9 +36,9 @@ REPO = Path(__file__).resolve().parent.parent
 
 #: part name -> C functions whose inclusive counts it sums
 PARTS = {
-    "exchange": ("mod_exchange_sample",),
+    "exchange": ("mod_exchange_sample", "loop_exchange"),
     "firmware": ("hil_fw_exchange",),
-    "decode_answers": ("decode_into",),
+    "answer_objects": ("message_object",),
     "plant_kernel": ("mod_sample", "mod_truth", "mod_advance"),
     "log_rows": ("mod_fields_into",),
     "lz4": ("LZ4_compress_fast_continue",),
@@ -81,7 +83,7 @@ def per_period(kind: str, periods: int, split: bool = False) -> dict:
             a, b = _inclusive(short), _inclusive(long)
             parts = {name: round(sum(b.get(f, 0) - a.get(f, 0) for f in funcs) / periods)
                      for name, funcs in PARTS.items()}
-            top = ("exchange", "plant_kernel", "log_rows", "lz4", "crc32")
+            top = ("exchange", "answer_objects", "plant_kernel", "log_rows", "lz4", "crc32")
             parts["python_and_objects"] = round(total - sum(parts[p] for p in top))
             out["parts"] = parts
     return out

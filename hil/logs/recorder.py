@@ -177,6 +177,16 @@ class Recorder:
         fewer a period; the list is emptied in place when sealed, never replaced)."""
         return self.telemetry if self.live is not None else self._telemetry_msgs.append
 
+    def batch_lists(self) -> tuple[list, list, list, list] | None:
+        """This batch's four lists (periods, truth tuples, sensor tuples, TELEMETRY messages),
+        for a period loop in C (protocol.ccodec.exchange_periods) that appends to them what
+        period() and telemetry() would, and calls seal() once the periods list holds
+        LOG_BATCH_PERIODS; None while a live viewer follows (period() also feeds it). The
+        lists are emptied in place when sealed, never replaced."""
+        if self.live is not None:
+            return None
+        return self._periods, self._truth, self._sensors, self._telemetry_msgs
+
     def seal(self) -> None:
         """This batch's rows become float64 blocks and, with a log, go to it (every
         LOG_BATCH_PERIODS periods, and before the log flushes or closes)."""

@@ -143,6 +143,12 @@ class Stimuli:
             self.session.profile.dc_link.source_voltage_v
         self.ramps = [(now, now + step.ramp_s, v0, step.voltage_v)]
 
+    @property
+    def idle(self) -> bool:
+        """Nothing to apply this period: no ramp, no repeated load table (a period loop may
+        then skip the call; only a plan step, between two run_periods, changes it)."""
+        return not self.ramps and self.load_step is None
+
     def __call__(self, _period: int) -> None:
         if self.load_step is not None:
             plant = self.session.plant

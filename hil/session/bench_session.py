@@ -29,7 +29,7 @@ from protocol.messages import (
 )
 
 from hil.links.registry import BoardConnection, connect
-from hil.logs.recorder import COMMAND_FIELDS, Recorder
+from hil.logs.recorder import COMMAND_FIELDS, LOG_BATCH_PERIODS, Recorder
 from hil.session.board_params import board_parameters
 from hil.session.cpu_latency import CpuLatencyHold
 from hil.session.errors import SessionError
@@ -39,6 +39,10 @@ from hil.session.realtime import run_realtime
 from hil.session.watchdog import Watchdog, await_answer
 
 RPM_PER_RAD_S = 60.0 / (2.0 * math.pi)
+# ccodec.exchange_periods: the answer kind it may take (a board's kind, once known), and the
+# states it ends in that this loop acts on
+_ANSWER_CODES = {Gates: 0, Duty: 1}
+_LOOP_PENDING, _LOOP_STOPPED = 2, 3
 _TRUTH_INDEX = {name: i for i, name in enumerate(TRUTH_FIELDS)}
 
 
@@ -460,7 +464,31 @@ class BenchSession:
         # A firmware library in this process with the C codec: SAMPLE out and the answers in
         # through one C call while no link fault is active (hil/session/link_tap.py).
         fast = tap.sample_exchanger() if tap is not None else None
-        for done in range(count):
+        # The plain periods in between, each one the C loop (ccodec.exchange_periods: the same
+        # steps, the same order, no Python frame) while nothing needs this loop: no mailbox or
+        # live viewer, no per-period stimulus, the answer kind known and no miss being counted;
+        # it hands back every period it does not take (see its docstring).
+        loop = exchange_periods = None
+        rows = recorder.batch_lists()
+        if fast is not None:           # (the tap made it with the C codec: already imported)
+            from protocol.ccodec import exchange_periods
+        if (exchange_periods is not None and rows is not None
+                and mailbox is None and self.board_hello is not None
+                and (on_period is None or getattr(on_period, "idle", False))):
+            loop = (fast.args, plant.sample, plant.truth, plant.step, rows, recorder.seal,
+                    LOG_BATCH_PERIODS, publish_every)
+        done = 0
+        while done < count:
+            pending = False          # period k sampled, recorded and sent by the C loop
+            if loop is not None and tap.fast_ready and not watchdog.consecutive:
+                answer = _ANSWER_CODES.get(self._answer_kind, -1)
+                ran, state = exchange_periods(*loop, count - done, stop, answer)
+                done += ran
+                if state == _LOOP_STOPPED:
+                    return done
+                if done >= count:
+                    return count
+                pending = state == _LOOP_PENDING
             if mailbox is not None and mailbox.pending:
                 self._apply_mailbox(mailbox)
             sample = plant.sample()
@@ -474,12 +502,15 @@ class BenchSession:
             saw_telemetry = False
             msg_out = None
             first_sent = None
-            recorded = recording = False
+            recorded = pending
+            recording = False
             try:
                 for attempt in range(sends):
                     if attempt:
                         self.resent_samples += 1
-                    if fast is not None and not attempt and tap.fast_ready:
+                    if pending and not attempt:
+                        pass                      # sent by the C loop
+                    elif fast is not None and not attempt and tap.fast_ready:
                         fast(k, sample.adc_i1, sample.adc_i2, sample.adc_vdc, sample.encoder,
                              sample.status)
                     else:
@@ -592,8 +623,9 @@ class BenchSession:
                 on_period(k)
             if mailbox is not None and k % publish_every == 0:
                 self._publish(mailbox, k)
+            done += 1
             if stop is not None and stop():
-                return done + 1
+                return done
         return count
 
     def _note_answer_kind(self, kind: type) -> None:

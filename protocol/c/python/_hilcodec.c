@@ -976,6 +976,468 @@ static PyObject *exchange_period(void *fn_addr, void *fw, EncoderObject *enc, De
     Py_RETURN_NONE;
 }
 
+/* ------------------------------------------------------------------ plain periods, in-process */
+
+PyDoc_STRVAR(exchange_periods_doc,
+"exchange_periods(target, sample, truth, step, rows, seal, batch, publish_every, count, stop,\n"
+"                 answer) -> (done, state)\n\n"
+"exchange_sample's period repeated in C for a run of plain lockstep periods, so no Python\n"
+"frame runs between them. target is exchange_sample's first eight arguments (exchange, fw,\n"
+"encoder, decoder, capture_out, capture_in, counts, inbox). Each period: s = sample() (a\n"
+"6-tuple: period k and the SAMPLE fields); SAMPLE(k) goes through the C exchange exactly as in\n"
+"exchange_sample, its answers decoded into a queue behind what inbox already held; the record:\n"
+"k, truth() and s[1:6] appended to rows = (periods, truths, sensors, telemetry), seal() once\n"
+"periods holds `batch`; then the queue is taken from its front as the bench's period loop takes\n"
+"its inbox: a TELEMETRY is appended to rows[3] as its message object, and the first GATES (answer\n"
+"0) or DUTY (answer 1) for period k, with no shoot-through, ends the period: step(gates) or\n"
+"step(duty=(d0/65535.0, d1/65535.0, d2/65535.0)), what follows it stays queued; then stop(), when\n"
+"given, may end the run. Anything else hands back to the caller. state: 0 `count` periods ran;\n"
+"1 the next period was not begun here (period k % publish_every == 0 or the instance closed:\n"
+"the caller runs it); 2 period k was sampled, recorded and sent, and inbox holds what is left\n"
+"of its answers from the first one not taken here (none: the firmware did not answer), which\n"
+"the caller handles; 3 stop() said stop. The queue left over always goes back to inbox as\n"
+"message objects, so the caller finds the state its own loop would have left.");
+
+#define LOOP_QUEUE 32
+enum { LOOP_DONE = 0, LOOP_HANDED = 1, LOOP_PENDING = 2, LOOP_STOPPED = 3 };
+
+/* The answers queued between periods: decoded structs, or (at entry) inbox's message objects. */
+typedef struct {
+    hil_msg m[LOOP_QUEUE];
+    PyObject *obj[LOOP_QUEUE]; /* owned when not NULL: an object taken from inbox */
+    int head, n;
+} answer_queue;
+
+static int append_new(PyObject *list, PyObject *item);
+
+/* Appends the queue's messages from its head to list as message objects and empties the queue;
+ * -1 on a failure (memory), the objects released all the same. */
+static int queue_to_list(answer_queue *q, PyObject *list)
+{
+    int rc = 0;
+    for (int i = q->head; i < q->n; i++) {
+        PyObject *o = q->obj[i];
+        q->obj[i] = NULL;
+        if (o == NULL && rc == 0) {
+            o = message_object(&q->m[i]);
+        }
+        if (o != NULL && rc == 0 && PyList_Append(list, o) < 0) {
+            rc = -1;
+        }
+        if (o == NULL) {
+            rc = -1;
+        }
+        Py_XDECREF(o);
+    }
+    q->head = q->n = 0;
+    return rc;
+}
+
+/* The queue, then spill (when not NULL, released here), onto inbox; -1 with an exception. */
+static int queue_to_inbox(answer_queue *q, PyObject *spill, PyObject *inbox)
+{
+    PyObject *list = PyList_New(0);
+    int rc = -1;
+    if (list != NULL) {
+        rc = queue_to_list(q, list);
+    } else {
+        for (int i = q->head; i < q->n; i++) {
+            Py_CLEAR(q->obj[i]);
+        }
+        q->head = q->n = 0;
+    }
+    if (rc == 0 && spill != NULL) {
+        rc = PyList_SetSlice(list, PyList_GET_SIZE(list), PyList_GET_SIZE(list), spill);
+    }
+    Py_XDECREF(spill);
+    if (rc == 0 && PyList_GET_SIZE(list) > 0) {
+        PyObject *r = PyObject_CallMethodOneArg(inbox, str_extend, list);
+        rc = r == NULL ? -1 : 0;
+        Py_XDECREF(r);
+    }
+    Py_XDECREF(list);
+    return rc;
+}
+
+static int append_new(PyObject *list, PyObject *item)
+{
+    if (item == NULL) {
+        return -1;
+    }
+    int rc = PyList_Append(list, item);
+    Py_DECREF(item);
+    return rc;
+}
+
+/* SAMPLE from the 6-tuple s, through the firmware; the answers decoded onto q (onto *spill, a
+ * list of message objects made at the queue's overflow, from then on). 0, or -1 with an
+ * exception. */
+/* (not inlined: bench/period_instructions.py counts it by name) */
+__attribute__((noinline))
+static int loop_exchange(fw_exchange_fn exchange, void *fw, EncoderObject *enc, DecoderObject *dec,
+                         PyObject *capture_out, PyObject *capture_in, PyObject *s, int64_t *counts,
+                         answer_queue *q, PyObject **spill)
+{
+    unsigned long v[6];
+    static const unsigned long max[6] = {0xFFFFFFFFul, 0xFFFFul, 0xFFFFul, 0xFFFFul, 0xFFFFul, 0x0Ful};
+    for (int i = 0; i < 6; i++) {
+        v[i] = PyLong_AsUnsignedLong(PyTuple_GET_ITEM(s, i));
+        if (PyErr_Occurred() || v[i] > max[i]) {
+            PyErr_Clear();
+            PyErr_Format(PyExc_ValueError, "exchange_periods: SAMPLE field %d out of range", i);
+            return -1;
+        }
+    }
+    hil_msg m;
+    memset(&m, 0, sizeof m);
+    m.type = HIL_MSG_SAMPLE;
+    m.seq = (uint8_t)enc->seq;
+    m.u.sample.period = (uint32_t)v[0];
+    m.u.sample.adc_i1 = (uint16_t)v[1];
+    m.u.sample.adc_i2 = (uint16_t)v[2];
+    m.u.sample.adc_vdc = (uint16_t)v[3];
+    m.u.sample.encoder = (uint16_t)v[4];
+    m.u.sample.status = (uint8_t)v[5];
+    uint8_t frame[HIL_MAX_ENCODED_FRAME];
+    int n_frame = hil_frame_encode(&m, frame, sizeof frame);
+    if (n_frame <= 0) {
+        PyErr_SetString(PyExc_ValueError, "exchange_periods: SAMPLE did not encode");
+        return -1;
+    }
+    enc->seq = (enc->seq + 1u) & 0xFFu;
+    if (append_bytes(capture_out, frame, (size_t)n_frame) < 0) {
+        return -1;
+    }
+    uint8_t tx[EXCHANGE_TX_CAP];
+    size_t frames_in = 0, bytes_in = 0;
+    int rc = 0;
+    size_t n = exchange(fw, frame, (size_t)n_frame, tx, sizeof tx);
+    while (n > 0u) {
+        frames_in += count_delimiters(tx, n);
+        bytes_in += n;
+        if (append_bytes(capture_in, tx, n) < 0) {
+            rc = -1;
+        }
+        const uint8_t *p = tx;
+        size_t len = n;
+        while (len > 0u) {
+            hil_msg a;
+            int got;
+            size_t used = hil_decoder_feed_buf(&dec->d, p, len, &a, &got);
+            p += used;
+            len -= used;
+            if (!got) {
+                continue;
+            }
+            if (*spill == NULL && q->n == LOOP_QUEUE) {
+                /* more answers than a period ever has: from here on the queue is a list of
+                 * message objects, and the caller takes the period */
+                *spill = PyList_New(0);
+                if (*spill == NULL || queue_to_list(q, *spill) < 0) {
+                    rc = -1;
+                }
+            }
+            if (*spill != NULL) {
+                if (rc < 0 || append_new(*spill, message_object(&a)) < 0) {
+                    rc = -1;    /* keep decoding: the counters stay those of the whole input */
+                }
+                continue;
+            }
+            q->m[q->n] = a;
+            q->obj[q->n] = NULL;
+            q->n++;
+        }
+        decoder_collect(dec);
+        if (n < sizeof tx) {
+            break;
+        }
+        n = exchange(fw, NULL, 0u, tx, sizeof tx);   /* drain what did not fit */
+    }
+    counts[0] += 1;
+    counts[1] += (int64_t)frames_in;
+    counts[2] += n_frame;
+    counts[3] += (int64_t)bytes_in;
+    return rc;
+}
+
+static PyObject *str_duty; /* "duty", interned at module init */
+
+static PyObject *loop_result(Py_ssize_t done, int state)
+{
+    return Py_BuildValue("(ni)", done, state);
+}
+
+static PyObject *mod_exchange_periods(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    (void)self;
+    if (nargs != 11) {
+        PyErr_SetString(PyExc_TypeError, "exchange_periods takes 11 arguments");
+        return NULL;
+    }
+    if (!ready()) {
+        return NULL;
+    }
+    PyObject *target = args[0], *sample = args[1], *truth = args[2], *step = args[3], *rows = args[4];
+    PyObject *seal = args[5], *stop = args[9];
+    if (!PyTuple_CheckExact(target) || PyTuple_GET_SIZE(target) != 8 || !PyTuple_CheckExact(rows) ||
+        PyTuple_GET_SIZE(rows) != 4) {
+        PyErr_SetString(PyExc_TypeError, "exchange_periods: target is exchange_sample's 8 first arguments, "
+                                         "rows a tuple of 4 lists");
+        return NULL;
+    }
+    PyObject *periods = PyTuple_GET_ITEM(rows, 0), *truths = PyTuple_GET_ITEM(rows, 1);
+    PyObject *sensors = PyTuple_GET_ITEM(rows, 2), *telemetry = PyTuple_GET_ITEM(rows, 3);
+    if (!PyList_CheckExact(periods) || !PyList_CheckExact(truths) || !PyList_CheckExact(sensors) ||
+        !PyList_CheckExact(telemetry)) {
+        PyErr_SetString(PyExc_TypeError, "exchange_periods: rows must be 4 lists");
+        return NULL;
+    }
+    Py_ssize_t batch = PyLong_AsSsize_t(args[6]);
+    Py_ssize_t publish_every = PyLong_AsSsize_t(args[7]);
+    Py_ssize_t count = PyLong_AsSsize_t(args[8]);
+    long answer = PyLong_AsLong(args[10]);
+    if (PyErr_Occurred()) {
+        return NULL;
+    }
+    if (batch < 1 || publish_every < 1 || count < 0) {
+        PyErr_SetString(PyExc_ValueError, "exchange_periods: batch and publish_every >= 1, count >= 0");
+        return NULL;
+    }
+    void *fn_addr = PyLong_AsVoidPtr(PyTuple_GET_ITEM(target, 0));
+    void *fw = PyLong_AsVoidPtr(PyTuple_GET_ITEM(target, 1));
+    if (PyErr_Occurred()) {
+        return NULL;
+    }
+    PyObject *enc_obj = PyTuple_GET_ITEM(target, 2), *dec_obj = PyTuple_GET_ITEM(target, 3);
+    PyObject *capture_out = PyTuple_GET_ITEM(target, 4), *capture_in = PyTuple_GET_ITEM(target, 5);
+    PyObject *inbox = PyTuple_GET_ITEM(target, 7);
+    if (fn_addr == NULL || fw == NULL || !PyObject_TypeCheck(enc_obj, &EncoderType) ||
+        !PyObject_TypeCheck(dec_obj, &DecoderType) ||
+        (capture_out != Py_None && !PyByteArray_CheckExact(capture_out)) ||
+        (capture_in != Py_None && !PyByteArray_CheckExact(capture_in))) {
+        PyErr_SetString(PyExc_TypeError, "exchange_periods: target is not exchange_sample's arguments");
+        return NULL;
+    }
+    Py_buffer counts_view;
+    if (PyObject_GetBuffer(PyTuple_GET_ITEM(target, 6), &counts_view, PyBUF_WRITABLE | PyBUF_C_CONTIGUOUS) < 0) {
+        return NULL;
+    }
+    if (counts_view.len < (Py_ssize_t)(5 * sizeof(int64_t))) {
+        PyBuffer_Release(&counts_view);
+        PyErr_SetString(PyExc_ValueError, "exchange_periods: counts must hold 5 int64");
+        return NULL;
+    }
+    int64_t *counts = (int64_t *)counts_view.buf;
+    EncoderObject *enc = (EncoderObject *)enc_obj;
+    DecoderObject *dec = (DecoderObject *)dec_obj;
+    fw_exchange_fn exchange = (fw_exchange_fn)(uintptr_t)fn_addr;
+    PyTypeObject *telemetry_cls = classes[HIL_MSG_TELEMETRY].cls;
+
+    answer_queue q;
+    q.head = q.n = 0;
+    PyObject *spill = NULL;
+    Py_ssize_t done = 0;
+    int state = LOOP_DONE;
+    int failed = 0;
+
+    /* What inbox already holds comes first, as the loop in Python takes it: TELEMETRY objects
+     * only (anything else is the caller's to handle). */
+    Py_ssize_t held = PyObject_Length(inbox);
+    if (held < 0) {
+        PyBuffer_Release(&counts_view);
+        return NULL;
+    }
+    if (held > 0) {
+        if (held > LOOP_QUEUE / 2) {
+            PyBuffer_Release(&counts_view);
+            return loop_result(0, LOOP_HANDED);
+        }
+        PyObject *items = PySequence_List(inbox);
+        if (items == NULL) {
+            PyBuffer_Release(&counts_view);
+            return NULL;
+        }
+        for (Py_ssize_t i = 0; i < held; i++) {
+            if (Py_TYPE(PyList_GET_ITEM(items, i)) != telemetry_cls) {
+                Py_DECREF(items);
+                PyBuffer_Release(&counts_view);
+                return loop_result(0, LOOP_HANDED);
+            }
+        }
+        PyObject *r = PyObject_CallMethod(inbox, "clear", NULL);
+        if (r == NULL) {
+            Py_DECREF(items);
+            PyBuffer_Release(&counts_view);
+            return NULL;
+        }
+        Py_DECREF(r);
+        for (Py_ssize_t i = 0; i < held; i++) {
+            q.obj[q.n] = Py_NewRef(PyList_GET_ITEM(items, i));
+            q.m[q.n].type = HIL_MSG_TELEMETRY;
+            q.n++;
+        }
+        Py_DECREF(items);
+    }
+
+    while (done < count) {
+        if (counts[4] != 0) {                   /* closed: the caller's path raises */
+            state = LOOP_HANDED;
+            break;
+        }
+        PyObject *s = PyObject_CallNoArgs(sample);
+        if (s == NULL) {
+            failed = 1;
+            break;
+        }
+        if (!PyTuple_Check(s) || PyTuple_GET_SIZE(s) != 6) {
+            Py_DECREF(s);
+            PyErr_SetString(PyExc_TypeError, "exchange_periods: sample() must return 6 values");
+            failed = 1;
+            break;
+        }
+        PyObject *k_obj = PyTuple_GET_ITEM(s, 0);
+        unsigned long k = PyLong_AsUnsignedLong(k_obj);
+        if (PyErr_Occurred()) {
+            Py_DECREF(s);
+            failed = 1;
+            break;
+        }
+        if (k % (unsigned long)publish_every == 0u) {
+            Py_DECREF(s);
+            state = LOOP_HANDED;
+            break;
+        }
+        if (loop_exchange(exchange, fw, enc, dec, capture_out, capture_in, s, counts, &q, &spill) < 0) {
+            Py_DECREF(s);
+            failed = 1;
+            break;
+        }
+        /* the record: what BenchSession's loop (and Recorder.period) appends */
+        if (PyList_Append(periods, k_obj) < 0 || append_new(truths, PyObject_CallNoArgs(truth)) < 0 ||
+            append_new(sensors, PyTuple_GetSlice(s, 1, 6)) < 0) {
+            Py_DECREF(s);
+            failed = 1;
+            break;
+        }
+        Py_DECREF(s);
+        if (PyList_GET_SIZE(periods) >= batch) {
+            PyObject *r = PyObject_CallNoArgs(seal);
+            if (r == NULL) {
+                failed = 1;
+                break;
+            }
+            Py_DECREF(r);
+        }
+        if (spill != NULL) {                    /* a flood of answers: the caller's */
+            state = LOOP_PENDING;
+            break;
+        }
+        /* the answers, from the queue's front */
+        int taken = 0;
+        long gates = -1;
+        const uint16_t *duty = NULL;
+        while (q.head < q.n) {
+            int i = q.head;
+            const hil_msg *a = &q.m[i];
+            if (a->type == HIL_MSG_TELEMETRY) {
+                PyObject *o = q.obj[i];
+                q.obj[i] = NULL;
+                if (o == NULL) {
+                    o = message_object(a);
+                }
+                if (append_new(telemetry, o) < 0) {
+                    failed = 1;
+                    break;
+                }
+                q.head++;
+                continue;
+            }
+            if (a->type == HIL_MSG_GATES && answer == 0 && a->u.gates.period == (uint32_t)k &&
+                !(a->u.gates.gates & (a->u.gates.gates >> 1) & 0x15)) {
+                gates = a->u.gates.gates;
+                taken = 1;
+                q.head++;
+            } else if (a->type == HIL_MSG_DUTY && answer == 1 && a->u.duty.period == (uint32_t)k) {
+                duty = a->u.duty.duty;
+                taken = 1;
+                q.head++;
+            }
+            break;                              /* taken, or not one this loop takes */
+        }
+        if (failed) {
+            break;
+        }
+        if (!taken) {
+            state = LOOP_PENDING;
+            break;
+        }
+        PyObject *r;
+        if (duty != NULL) {
+            PyObject *d = Py_BuildValue("(ddd)", duty[0] / 65535.0, duty[1] / 65535.0, duty[2] / 65535.0);
+            if (d == NULL) {
+                failed = 1;
+                break;
+            }
+            PyObject *kw = PyTuple_Pack(1, str_duty);
+            PyObject *call_args[1] = {d};
+            r = kw == NULL ? NULL : PyObject_Vectorcall(step, call_args, 0, kw);
+            Py_XDECREF(kw);
+            Py_DECREF(d);
+        } else {
+            PyObject *g = PyLong_FromLong(gates);
+            r = g == NULL ? NULL : PyObject_CallOneArg(step, g);
+            Py_XDECREF(g);
+        }
+        if (r == NULL) {
+            failed = 1;
+            break;
+        }
+        Py_DECREF(r);
+        if (q.head == q.n) {
+            q.head = q.n = 0;
+        }
+        done++;
+        if (stop != Py_None) {
+            r = PyObject_CallNoArgs(stop);
+            if (r == NULL) {
+                failed = 1;
+                break;
+            }
+            int yes = PyObject_IsTrue(r);
+            Py_DECREF(r);
+            if (yes < 0) {
+                failed = 1;
+                break;
+            }
+            if (yes) {
+                state = LOOP_STOPPED;
+                break;
+            }
+        }
+        if (q.head > 0) {                       /* keep the queue's room at its front */
+            memmove(&q.m[0], &q.m[q.head], (size_t)(q.n - q.head) * sizeof q.m[0]);
+            memmove(&q.obj[0], &q.obj[q.head], (size_t)(q.n - q.head) * sizeof q.obj[0]);
+            q.n -= q.head;
+            q.head = 0;
+        }
+    }
+    PyBuffer_Release(&counts_view);
+    /* what is left of the queue goes back to inbox: the state the Python loop leaves */
+    if (failed) {
+        PyObject *et, *ev, *tb;
+        PyErr_Fetch(&et, &ev, &tb);
+        if (queue_to_inbox(&q, spill, inbox) < 0) {
+            PyErr_Clear();
+        }
+        PyErr_Restore(et, ev, tb);
+        return NULL;
+    }
+    if (queue_to_inbox(&q, spill, inbox) < 0) {
+        return NULL;
+    }
+    return loop_result(done, state);
+}
+
 PyDoc_STRVAR(fields_into_doc,
 "fields_into(rows, buffer, offset) -> count\n\n"
 "Writes `rows`, a list of decoded messages (instances of one of protocol/messages.py's\n"
@@ -1106,6 +1568,7 @@ static PyMethodDef module_methods[] = {
     {"crc16", mod_crc16, METH_O, crc16_doc},
     {"exchange_sample", (PyCFunction)(void (*)(void))mod_exchange_sample, METH_FASTCALL, exchange_sample_doc},
     {"fields_into", (PyCFunction)(void (*)(void))mod_fields_into, METH_FASTCALL, fields_into_doc},
+    {"exchange_periods", (PyCFunction)(void (*)(void))mod_exchange_periods, METH_FASTCALL, exchange_periods_doc},
     {NULL, NULL, 0, NULL},
 };
 
@@ -1130,6 +1593,9 @@ PyMODINIT_FUNC PyInit__hilcodec(void)
         }
     }
     if (str_extend == NULL && (str_extend = PyUnicode_InternFromString("extend")) == NULL) {
+        return NULL;
+    }
+    if (str_duty == NULL && (str_duty = PyUnicode_InternFromString("duty")) == NULL) {
         return NULL;
     }
     PyObject *m = PyModule_Create(&module_def);

@@ -1,0 +1,242 @@
+"""The C period loop (protocol.ccodec.exchange_periods) that runs the plain lockstep periods of
+an in-process firmware, against what the bench's Python loop does.
+
+Two kinds of evidence:
+- whole sessions with the stub, run once with the C loop and once with the Python loop only
+  (exchange_periods set to None): the same signals bit for bit, the same raw frames and link
+  counters, the same period count returned, for GATES (DTC) and DUTY (FOC) answers, a stop
+  condition, a COMMAND between runs and a per-period stimulus that is idle or not;
+- the loop alone, driven by a scripted board (a ctypes callback in hil_fw_exchange's place) and a
+  stand-in plant: every answer it must not take (stale, shoot-through, another kind, a STATUS,
+  none at all) is handed back at the right period with the rest of the answers queued, as the
+  Python loop would find them.
+"""
+from __future__ import annotations
+
+import ctypes
+from array import array
+from collections import deque
+
+import numpy as np
+import pytest
+
+from protocol import ccodec, codec
+from protocol.messages import Duty, Gates, Sample, Status, Telemetry
+
+pytestmark = pytest.mark.skipif(not ccodec.AVAILABLE or ccodec.exchange_periods is None,
+                                reason=ccodec.UNAVAILABLE_REASON or "an old _hilcodec build")
+
+
+# ------------------------------------------------------------------ whole sessions
+
+def _session_run(tmp_path, name, c_loop, monkeypatch, scenario):
+    from hil.logs.reader import read_log
+    from hil.session import BenchSession, SessionConfig
+    from hil.session.board_params import load_bench_profile
+
+    calls = []
+    if c_loop:
+        real = ccodec.exchange_periods
+
+        def counting(*args):
+            calls.append(1)
+            return real(*args)
+        monkeypatch.setattr(ccodec, "exchange_periods", counting)
+    else:
+        monkeypatch.setattr(ccodec, "exchange_periods", None)
+    log = tmp_path / f"{name}.mcap"
+    with BenchSession(load_bench_profile(), SessionConfig(link="stub", seed=11, log_path=log)) as s:
+        returned = scenario(s)
+        s.drain()
+        signals = {n: v for n, (_, v, _) in s.recorder.arrays().items()}
+        counters = dict(s.tap.counters)
+        stats = (s.missed_answers, s.stale_answers, s.resent_samples, s.plant.period,
+                 s._answer_kind)
+    monkeypatch.undo()
+    frames = {t: read_log(log)[t] for t in ("/link/frames_out", "/link/frames_in")}
+    return signals, counters, stats, returned, frames, len(calls)
+
+
+def _same(tmp_path, monkeypatch, scenario, c_loop_used=True):
+    fast = _session_run(tmp_path, "c", True, monkeypatch, scenario)
+    slow = _session_run(tmp_path, "py", False, monkeypatch, scenario)
+    assert fast[0].keys() == slow[0].keys()
+    assert [n for n in fast[0] if not np.array_equal(fast[0][n], slow[0][n], equal_nan=True)] == []
+    assert fast[1:4] == slow[1:4]
+    for topic in fast[4]:
+        for field, values in fast[4][topic].fields.items():
+            assert list(values) == list(slow[4][topic].fields[field]), (topic, field)
+    assert (fast[5] > 0) == c_loop_used
+    return fast
+
+
+def _dtc_with_stop(s):
+    s.send_command(enable=True, speed_source="ekf", speed_ref_rpm=2000)
+    first = s.run_periods(1500)
+    s.send_command(speed_ref_rpm=1000)
+    stop_at = s.plant.period + 537
+    second = s.run_periods(5000, stop=lambda: s.plant.period >= stop_at)
+    return first, second
+
+
+def test_dtc_gates_and_a_stop_condition_as_the_python_loop(tmp_path, monkeypatch):
+    fast = _same(tmp_path, monkeypatch, _dtc_with_stop)
+    assert fast[3] == (1500, 537)
+    assert fast[1]["tx_frames"] >= 2000
+
+
+def test_foc_duty_answers_as_the_python_loop(tmp_path, monkeypatch):
+    def foc(s):
+        s.param_set("control_law", 1)
+        s.send_command(enable=True, speed_source="encoder", speed_ref_rpm=1500)
+        return s.run_periods(1800)
+    fast = _same(tmp_path, monkeypatch, foc)
+    assert fast[2][4] is Duty
+
+
+class _Stimulus:
+    """A per-period hook that is idle until armed: the loop may skip it only while idle."""
+
+    def __init__(self, session):
+        self.session, self.armed, self.calls = session, False, 0
+
+    @property
+    def idle(self):
+        return not self.armed
+
+    def __call__(self, k):
+        self.calls += 1
+        if self.armed:
+            self.session.plant.set_dc_voltage(70.0 - 0.01 * (k % 100))
+
+
+def test_a_per_period_hook_runs_every_period_unless_idle(tmp_path, monkeypatch):
+    idle_calls = []
+
+    def hooked(s):
+        hook = _Stimulus(s)
+        s.on_period = hook
+        s.send_command(enable=True, speed_source="ekf", speed_ref_rpm=1500)
+        s.run_periods(600)                 # idle: the C loop may skip it
+        idle_calls.append(hook.calls)
+        hook.armed = True
+        s.run_periods(400)                 # armed: called every period, in Python
+        return hook.calls - idle_calls[-1]
+    fast = _same(tmp_path, monkeypatch, hooked)
+    assert fast[3] == 400
+    assert idle_calls[0] < 600 and idle_calls[1] == 600     # C loop first, then the Python one
+
+
+# ------------------------------------------------------------------ the loop alone
+
+_EXCHANGE = ctypes.CFUNCTYPE(ctypes.c_size_t, ctypes.c_void_p, ctypes.POINTER(ctypes.c_uint8),
+                             ctypes.c_size_t, ctypes.POINTER(ctypes.c_uint8), ctypes.c_size_t)
+
+
+def _telemetry(k):
+    return Telemetry(k, 1, 0, 1, 0b100001, *([0.5] * 12))
+
+
+class _Rig:
+    """A scripted board (answers[k]: the messages it sends for SAMPLE(k)) and a stand-in plant
+    (sample/truth/step on a period counter) around one exchange_periods call."""
+
+    def __init__(self, answers, publish_every=1000, batch=1000):
+        self.answers = answers
+        self.k = 1
+        self.steps = []
+        self.board_encoder = codec.FrameEncoder()
+        self.board_decoder = codec.StreamDecoder()
+        self.exchange = _EXCHANGE(self._board)
+        self.counts = array("q", [0] * 5)
+        self.inbox = deque()
+        self.rows = ([], [], [], [])
+        self.sealed = 0
+        self.publish_every, self.batch = publish_every, batch
+        self.target = (ctypes.cast(self.exchange, ctypes.c_void_p).value, 1, ccodec.FrameEncoder(),
+                       ccodec.StreamDecoder(), bytearray(), bytearray(), self.counts, self.inbox)
+
+    def _board(self, _fw, rx, rx_len, tx, tx_cap):
+        if rx_len == 0:
+            return 0
+        (sample,) = self.board_decoder.feed(bytes(rx[:rx_len]))
+        out = b"".join(self.board_encoder.encode(m) for m in self.answers.get(sample.period, ()))
+        assert len(out) <= tx_cap
+        ctypes.memmove(tx, out, len(out))
+        return len(out)
+
+    def sample(self):
+        return (self.k, 2048, 2050, 3000, self.k & 0xFFFF, 0)
+
+    def truth(self):
+        return (self.k * 1e-4, float(self.k))
+
+    def step(self, gates=None, duty=None):
+        self.steps.append((self.k, gates, duty))
+        self.k += 1
+
+    def seal(self):
+        self.sealed += 1
+        for rows in self.rows:
+            rows.clear()
+
+    def run(self, count, answer=0, stop=None):
+        return ccodec.exchange_periods(self.target, self.sample, self.truth, self.step, self.rows,
+                                       self.seal, self.batch, self.publish_every, count, stop, answer)
+
+
+def test_plain_periods_are_taken_and_the_answers_after_gates_stay_queued():
+    rig = _Rig({k: [Gates(k, 0b100001), _telemetry(k)] for k in range(1, 6)})
+    assert rig.run(5) == (5, 0)
+    assert rig.steps == [(k, 0b100001, None) for k in range(1, 6)]
+    periods, truths, sensors, telemetry = rig.rows
+    assert periods == [1, 2, 3, 4, 5] and truths[2] == (3 * 1e-4, 3.0)
+    assert sensors[0] == (2048, 2050, 3000, 1, 0)
+    # TELEMETRY(k) comes after GATES(k): taken at period k + 1, as the Python loop pops it
+    assert [m.period for m in telemetry] == [1, 2, 3, 4]
+    assert list(rig.inbox) == [_telemetry(5)]
+    assert list(rig.counts) == [5, 10, sum(len(codec.FrameEncoder().encode(Sample(k, 2048, 2050, 3000, k, 0)))
+                                           for k in range(1, 6)), rig.counts[3], 0]
+    # what inbox held at entry is taken first
+    rig.answers[6] = [Gates(6, 0)]
+    assert rig.run(1) == (1, 0)
+    assert [m.period for m in rig.rows[3]][-1] == 5 and not rig.inbox
+
+
+@pytest.mark.parametrize("why, answers", [
+    ("stale", [Gates(2, 0b100001), _telemetry(2)]),
+    ("shoot-through", [Gates(3, 0b000011)]),
+    ("another kind", [Duty(3, (1000, 2000, 3000))]),
+    ("a STATUS first", [Status(3, 1, 0), Gates(3, 0b100001)]),
+    ("no answer", []),
+])
+def test_an_answer_it_must_not_take_is_handed_back_at_its_period(why, answers):
+    script = {1: [Gates(1, 0b100001)], 2: [Gates(2, 0b100001), _telemetry(2)], 3: answers}
+    rig = _Rig(script)
+    done, state = rig.run(10)
+    assert (done, state) == (2, 2), why
+    assert [s[0] for s in rig.steps] == [1, 2]
+    # period 3 sampled, recorded and sent; its answers (TELEMETRY(2) first) wait in inbox
+    assert rig.rows[0] == [1, 2, 3] and rig.counts[0] == 3
+    # the TELEMETRY(2) queued behind GATES(2) was taken; from the first answer not taken on,
+    # everything is left for the caller, in order
+    assert [m.period for m in rig.rows[3]] == [2]
+    assert list(rig.inbox) == answers
+
+
+def test_duty_and_the_publish_boundary_and_stop():
+    rig = _Rig({k: [Duty(k, (0, 32768, 65535))] for k in range(1, 20)}, publish_every=7)
+    assert rig.run(20, answer=1) == (6, 1)          # period 7 is the caller's (raw frames)
+    assert rig.steps[0] == (1, None, (0.0, 32768 / 65535.0, 1.0))
+    rig.k = 8
+    assert rig.run(20, answer=1, stop=lambda: rig.k >= 10) == (2, 3)
+    assert rig.run(20, answer=0) == (0, 2)          # DUTY where GATES is the board's kind
+
+
+def test_batches_are_sealed_and_a_closed_instance_is_not_called():
+    rig = _Rig({k: [Gates(k, 0)] for k in range(1, 12)}, batch=4)
+    assert rig.run(10) == (10, 0)
+    assert rig.sealed == 2 and rig.rows[0] == [9, 10]
+    rig.counts[4] = 1
+    assert rig.run(1) == (0, 1)
+    assert rig.counts[0] == 10
