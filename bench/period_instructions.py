@@ -7,7 +7,7 @@ only in the number of periods (start-up, handshake and warm-up cancel). The logg
 then split into the C functions that do its work, by their inclusive counts:
 
 - ``exchange``: SAMPLE encoded, handed to the stub and its answers decoded, in C (the period
-  loop's loop_exchange, or exchange_sample for a period the loop hands back), of which
+  loop and exchange_sample share: exchange_frames in protocol/c/python/_hilcodec.c), of which
   ``firmware`` is the stub itself (hil_fw_exchange: its decoder, control law and encoder);
 - ``answer_objects``: the TELEMETRY message objects the recorder keeps (message_object);
 - ``plant_kernel``: the plant's C sample, truth and RK4 (plant_rt/c/_plantnet.c);
@@ -36,7 +36,7 @@ REPO = Path(__file__).resolve().parent.parent
 
 #: part name -> C functions whose inclusive counts it sums
 PARTS = {
-    "exchange": ("mod_exchange_sample", "loop_exchange"),
+    "exchange": ("exchange_frames",),
     "firmware": ("hil_fw_exchange",),
     "answer_objects": ("message_object",),
     "plant_kernel": ("mod_sample", "mod_truth", "mod_advance"),

@@ -909,10 +909,11 @@ static PyObject *mod_exchange_sample(PyObject *self, PyObject *const *args, Py_s
     return result;
 }
 
-/* exchange_sample less its argument checks: counts[0..3] are updated in place. */
-static PyObject *exchange_period(void *fn_addr, void *fw, EncoderObject *enc, DecoderObject *dec,
-                                 PyObject *capture_out, PyObject *capture_in, PyObject *inbox,
-                                 PyObject *const *fields, int64_t counts[5])
+/* SAMPLE from its six fields (period, adc_i1, adc_i2, adc_vdc, encoder, status) encoded into
+ * frame with enc's sequence number (then advanced) and appended to capture_out: the frame's
+ * length, or -1 with ValueError naming `who` (a field out of range) or a memory error. */
+static int encode_sample_frame(const char *who, PyObject *const *fields, EncoderObject *enc,
+                               PyObject *capture_out, uint8_t frame[HIL_MAX_ENCODED_FRAME])
 {
     unsigned long v[6];
     static const unsigned long max[6] = {0xFFFFFFFFul, 0xFFFFul, 0xFFFFul, 0xFFFFul, 0xFFFFul, 0x0Ful};
@@ -920,7 +921,8 @@ static PyObject *exchange_period(void *fn_addr, void *fw, EncoderObject *enc, De
         v[i] = PyLong_AsUnsignedLong(fields[i]);
         if (PyErr_Occurred() || v[i] > max[i]) {
             PyErr_Clear();
-            return PyErr_Format(PyExc_ValueError, "exchange_sample: SAMPLE field %d out of range", i);
+            PyErr_Format(PyExc_ValueError, "%s: SAMPLE field %d out of range", who, i);
+            return -1;
         }
     }
     hil_msg m;
@@ -933,70 +935,17 @@ static PyObject *exchange_period(void *fn_addr, void *fw, EncoderObject *enc, De
     m.u.sample.adc_vdc = (uint16_t)v[3];
     m.u.sample.encoder = (uint16_t)v[4];
     m.u.sample.status = (uint8_t)v[5];
-    uint8_t frame[HIL_MAX_ENCODED_FRAME];
-    int n_frame = hil_frame_encode(&m, frame, sizeof frame);
+    int n_frame = hil_frame_encode(&m, frame, HIL_MAX_ENCODED_FRAME);
     if (n_frame <= 0) {
-        PyErr_SetString(PyExc_ValueError, "exchange_sample: SAMPLE did not encode");
-        return NULL;
+        PyErr_Format(PyExc_ValueError, "%s: SAMPLE did not encode", who);
+        return -1;
     }
     enc->seq = (enc->seq + 1u) & 0xFFu;
     if (append_bytes(capture_out, frame, (size_t)n_frame) < 0) {
-        return NULL;
+        return -1;
     }
-    fw_exchange_fn exchange = (fw_exchange_fn)(uintptr_t)fn_addr;
-    PyObject *out = PyList_New(0);
-    if (out == NULL) {
-        return NULL;
-    }
-    uint8_t tx[EXCHANGE_TX_CAP];
-    size_t frames_in = 0, bytes_in = 0;
-    size_t n = exchange(fw, frame, (size_t)n_frame, tx, sizeof tx);
-    while (n > 0u) {
-        frames_in += count_delimiters(tx, n);
-        bytes_in += n;
-        if (append_bytes(capture_in, tx, n) < 0 || decode_into(dec, tx, n, out) < 0) {
-            Py_DECREF(out);
-            return NULL;
-        }
-        if (n < sizeof tx) {
-            break;
-        }
-        n = exchange(fw, NULL, 0u, tx, sizeof tx);   /* drain what did not fit */
-    }
-    counts[0] += 1;
-    counts[1] += (int64_t)frames_in;
-    counts[2] += n_frame;
-    counts[3] += (int64_t)bytes_in;
-    PyObject *r = PyObject_CallMethodOneArg(inbox, str_extend, out);
-    Py_DECREF(out);
-    if (r == NULL) {
-        return NULL;
-    }
-    Py_DECREF(r);
-    Py_RETURN_NONE;
+    return n_frame;
 }
-
-/* ------------------------------------------------------------------ plain periods, in-process */
-
-PyDoc_STRVAR(exchange_periods_doc,
-"exchange_periods(target, sample, truth, step, rows, seal, batch, publish_every, count, stop,\n"
-"                 answer) -> (done, state)\n\n"
-"exchange_sample's period repeated in C for a run of plain lockstep periods, so no Python\n"
-"frame runs between them. target is exchange_sample's first eight arguments (exchange, fw,\n"
-"encoder, decoder, capture_out, capture_in, counts, inbox). Each period: s = sample() (a\n"
-"6-tuple: period k and the SAMPLE fields); SAMPLE(k) goes through the C exchange exactly as in\n"
-"exchange_sample, its answers decoded into a queue behind what inbox already held; the record:\n"
-"k, truth() and s[1:6] appended to rows = (periods, truths, sensors, telemetry), seal() once\n"
-"periods holds `batch`; then the queue is taken from its front as the bench's period loop takes\n"
-"its inbox: a TELEMETRY is appended to rows[3] as its message object, and the first GATES (answer\n"
-"0) or DUTY (answer 1) for period k, with no shoot-through, ends the period: step(gates) or\n"
-"step(duty=(d0/65535.0, d1/65535.0, d2/65535.0)), what follows it stays queued; then stop(), when\n"
-"given, may end the run. Anything else hands back to the caller. state: 0 `count` periods ran;\n"
-"1 the next period was not begun here (period k % publish_every == 0 or the instance closed:\n"
-"the caller runs it); 2 period k was sampled, recorded and sent, and inbox holds what is left\n"
-"of its answers from the first one not taken here (none: the firmware did not answer), which\n"
-"the caller handles; 3 stop() said stop. The queue left over always goes back to inbox as\n"
-"message objects, so the caller finds the state its own loop would have left.");
 
 #define LOOP_QUEUE 32
 enum { LOOP_DONE = 0, LOOP_HANDED = 1, LOOP_PENDING = 2, LOOP_STOPPED = 3 };
@@ -1069,43 +1018,19 @@ static int append_new(PyObject *list, PyObject *item)
     return rc;
 }
 
-/* SAMPLE from the 6-tuple s, through the firmware; the answers decoded onto q (onto *spill, a
- * list of message objects made at the queue's overflow, from then on). 0, or -1 with an
- * exception. */
-/* (not inlined: bench/period_instructions.py counts it by name) */
+/* One period's exchange with the firmware: SAMPLE from its six fields (encode_sample_frame),
+ * through `exchange`, both directions captured and counted in counts[0..3], the answers decoded
+ * onto q, or as message objects onto the list *spill when q is NULL or once it is full (the list
+ * is then made here). 0, or -1 with an exception (decoding goes on: the counters stay those of
+ * the whole input). Not inlined: bench/period_instructions.py counts it by name. */
 __attribute__((noinline))
-static int loop_exchange(fw_exchange_fn exchange, void *fw, EncoderObject *enc, DecoderObject *dec,
-                         PyObject *capture_out, PyObject *capture_in, PyObject *s, int64_t *counts,
-                         answer_queue *q, PyObject **spill)
+static int exchange_frames(const char *who, fw_exchange_fn exchange, void *fw, EncoderObject *enc,
+                           DecoderObject *dec, PyObject *capture_out, PyObject *capture_in,
+                           PyObject *const *fields, int64_t *counts, answer_queue *q, PyObject **spill)
 {
-    unsigned long v[6];
-    static const unsigned long max[6] = {0xFFFFFFFFul, 0xFFFFul, 0xFFFFul, 0xFFFFul, 0xFFFFul, 0x0Ful};
-    for (int i = 0; i < 6; i++) {
-        v[i] = PyLong_AsUnsignedLong(PyTuple_GET_ITEM(s, i));
-        if (PyErr_Occurred() || v[i] > max[i]) {
-            PyErr_Clear();
-            PyErr_Format(PyExc_ValueError, "exchange_periods: SAMPLE field %d out of range", i);
-            return -1;
-        }
-    }
-    hil_msg m;
-    memset(&m, 0, sizeof m);
-    m.type = HIL_MSG_SAMPLE;
-    m.seq = (uint8_t)enc->seq;
-    m.u.sample.period = (uint32_t)v[0];
-    m.u.sample.adc_i1 = (uint16_t)v[1];
-    m.u.sample.adc_i2 = (uint16_t)v[2];
-    m.u.sample.adc_vdc = (uint16_t)v[3];
-    m.u.sample.encoder = (uint16_t)v[4];
-    m.u.sample.status = (uint8_t)v[5];
     uint8_t frame[HIL_MAX_ENCODED_FRAME];
-    int n_frame = hil_frame_encode(&m, frame, sizeof frame);
-    if (n_frame <= 0) {
-        PyErr_SetString(PyExc_ValueError, "exchange_periods: SAMPLE did not encode");
-        return -1;
-    }
-    enc->seq = (enc->seq + 1u) & 0xFFu;
-    if (append_bytes(capture_out, frame, (size_t)n_frame) < 0) {
+    int n_frame = encode_sample_frame(who, fields, enc, capture_out, frame);
+    if (n_frame < 0) {
         return -1;
     }
     uint8_t tx[EXCHANGE_TX_CAP];
@@ -1129,7 +1054,7 @@ static int loop_exchange(fw_exchange_fn exchange, void *fw, EncoderObject *enc, 
             if (!got) {
                 continue;
             }
-            if (*spill == NULL && q->n == LOOP_QUEUE) {
+            if (*spill == NULL && q->n == LOOP_QUEUE) {   /* (no list yet: q is not NULL) */
                 /* more answers than a period ever has: from here on the queue is a list of
                  * message objects, and the caller takes the period */
                 *spill = PyList_New(0);
@@ -1159,6 +1084,51 @@ static int loop_exchange(fw_exchange_fn exchange, void *fw, EncoderObject *enc, 
     counts[3] += (int64_t)bytes_in;
     return rc;
 }
+
+/* exchange_sample less its argument checks: counts[0..3] are updated in place. */
+static PyObject *exchange_period(void *fn_addr, void *fw, EncoderObject *enc, DecoderObject *dec,
+                                 PyObject *capture_out, PyObject *capture_in, PyObject *inbox,
+                                 PyObject *const *fields, int64_t counts[5])
+{
+    PyObject *out = PyList_New(0);
+    if (out == NULL) {
+        return NULL;
+    }
+    if (exchange_frames("exchange_sample", (fw_exchange_fn)(uintptr_t)fn_addr, fw, enc, dec, capture_out,
+                        capture_in, fields, counts, NULL, &out) < 0) {
+        Py_DECREF(out);
+        return NULL;
+    }
+    PyObject *r = PyObject_CallMethodOneArg(inbox, str_extend, out);
+    Py_DECREF(out);
+    if (r == NULL) {
+        return NULL;
+    }
+    Py_DECREF(r);
+    Py_RETURN_NONE;
+}
+
+/* ------------------------------------------------------------------ plain periods, in-process */
+
+PyDoc_STRVAR(exchange_periods_doc,
+"exchange_periods(target, sample, truth, step, rows, seal, batch, publish_every, count, stop,\n"
+"                 answer) -> (done, state)\n\n"
+"exchange_sample's period repeated in C for a run of plain lockstep periods, so no Python\n"
+"frame runs between them. target is exchange_sample's first eight arguments (exchange, fw,\n"
+"encoder, decoder, capture_out, capture_in, counts, inbox). Each period: s = sample() (a\n"
+"6-tuple: period k and the SAMPLE fields); SAMPLE(k) goes through the C exchange exactly as in\n"
+"exchange_sample, its answers decoded into a queue behind what inbox already held; the record:\n"
+"k, truth() and s[1:6] appended to rows = (periods, truths, sensors, telemetry), seal() once\n"
+"periods holds `batch`; then the queue is taken from its front as the bench's period loop takes\n"
+"its inbox: a TELEMETRY is appended to rows[3] as its message object, and the first GATES (answer\n"
+"0) or DUTY (answer 1) for period k, with no shoot-through, ends the period: step(gates) or\n"
+"step(duty=(d0/65535.0, d1/65535.0, d2/65535.0)), what follows it stays queued; then stop(), when\n"
+"given, may end the run. Anything else hands back to the caller. state: 0 `count` periods ran;\n"
+"1 the next period was not begun here (period k % publish_every == 0 or the instance closed:\n"
+"the caller runs it); 2 period k was sampled, recorded and sent, and inbox holds what is left\n"
+"of its answers from the first one not taken here (none: the firmware did not answer), which\n"
+"the caller handles; 3 stop() said stop. The queue left over always goes back to inbox as\n"
+"message objects, so the caller finds the state its own loop would have left.");
 
 static PyObject *str_duty; /* "duty", interned at module init */
 
@@ -1307,7 +1277,8 @@ static PyObject *mod_exchange_periods(PyObject *self, PyObject *const *args, Py_
             state = LOOP_HANDED;
             break;
         }
-        if (loop_exchange(exchange, fw, enc, dec, capture_out, capture_in, s, counts, &q, &spill) < 0) {
+        if (exchange_frames("exchange_periods", exchange, fw, enc, dec, capture_out, capture_in,
+                            &PyTuple_GET_ITEM(s, 0), counts, &q, &spill) < 0) {
             Py_DECREF(s);
             failed = 1;
             break;
