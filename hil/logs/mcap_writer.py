@@ -5,8 +5,9 @@ struct.pack calls per message (about 4 us for 20 doubles, bench/mcap_logging.py)
 full-rate message is one precompiled ``struct.Struct.pack_into`` of the whole MCAP
 Message record, protobuf payload included, into the preallocated open chunk (about
 1.4 us); the chunk's message indexes, the metadata, the summary and the footer are
-written with the mcap package's record classes. Files read back with the mcap package's
-readers (CRCs validated) and open in Foxglove.
+serialized by hil.logs.mcap_records (the bytes of the mcap package's record classes, without
+importing them). Files read back with the mcap package's readers (CRCs validated) and open
+in Foxglove.
 
 Protobuf wire format used (only fixed-width scalar fields, none omitted, so the layout
 of every message of a channel is constant): each field is its tag varint
@@ -33,23 +34,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from mcap.data_stream import RecordBuilder
-from mcap.opcode import Opcode
-from mcap.records import (
-    Attachment,
-    AttachmentIndex,
-    Channel,
-    ChunkIndex,
-    DataEnd,
-    Header,
-    Metadata,
-    MetadataIndex,
-    Schema,
-    Statistics,
-    SummaryOffset,
-)
 
-MCAP_MAGIC = b"\x89MCAP0\r\n"
+from hil.logs import mcap_records as rec
+
 LIBRARY = "hil-bench mcap_log"
 DEFAULT_CHUNK_SIZE = 64 * 1024
 MAX_CHUNK_SIZE = 64 * 1024 * 1024
@@ -73,7 +60,6 @@ _LABEL_OPTIONAL = 1             # FieldDescriptorProto.LABEL_OPTIONAL
 _MESSAGE_PREFIX = "<BQHIQQ"
 _MESSAGE_PREFIX_LEN = struct.calcsize(_MESSAGE_PREFIX)  # 31 bytes, of which 22 are the body
 _MESSAGE_PREFIX_STRUCT = struct.Struct(_MESSAGE_PREFIX)
-_RECORD_HEAD = struct.Struct("<BQ")
 _BYTES_COUNT_TAG = (1 << 3) | 5  # field 1 `count`, fixed32
 _BYTES_DATA_TAG = (2 << 3) | 2  # field 2 `data`, length-delimited
 _BYTES_HEAD = struct.Struct("<BIB")  # count tag, count, data tag (its length varint follows)
@@ -261,7 +247,7 @@ class FixedChannel:
         self._pack_into = struct.Struct(fmt).pack_into
         self._chunk = log._open
         # pack_into(buffer, offset, opcode, length, channel, sequence, log time, publish time, tag, value, ...)
-        self._args = [self._chunk.buf, 0, Opcode.MESSAGE, self.record_size - 9, channel_id, 0, 0, 0] + tail
+        self._args = [self._chunk.buf, 0, rec.MESSAGE, self.record_size - 9, channel_id, 0, 0, 0] + tail
         self._index = _new_index()
         # The same record as a numpy structured type, for write_many: a batch of messages is
         # filled column by column and copied into the chunk in one go.
@@ -288,7 +274,7 @@ class FixedChannel:
         self._int_hi = np.array([np.iinfo(self._dtype[self._value_names[i]]).max for i in self._int_cols],
                                 dtype=np.float64)
         self._template = np.zeros(1, self._dtype)
-        self._template["op"] = Opcode.MESSAGE
+        self._template["op"] = rec.MESSAGE
         self._template["length"] = self.record_size - 9
         self._template["channel"] = channel_id
         for number, (_, type_name) in enumerate(fields, start=1):
@@ -398,7 +384,7 @@ class _VariableChannel:
         end = pos + _MESSAGE_PREFIX_LEN + len(payload)
         # slice assignment writes in place, growing the buffer only for an outsized message
         chunk.buf[pos:end] = _MESSAGE_PREFIX_STRUCT.pack(
-            Opcode.MESSAGE, end - pos - 9, self.channel_id, 0, log_time_ns, log_time_ns) + payload
+            rec.MESSAGE, end - pos - 9, self.channel_id, 0, log_time_ns, log_time_ns) + payload
         chunk.fill = end
         index = self._index
         index.append(log_time_ns)
@@ -479,11 +465,13 @@ class McapLog:
         self._open = _OpenChunk(self.chunk_size)
         self._channels: list[FixedChannel | BytesChannel | JsonChannel] = []
         self._by_topic: dict[str, FixedChannel | BytesChannel | JsonChannel] = {}
-        self._schemas: dict[tuple[str, str, bytes], Schema] = {}
-        self._channel_records: list[Channel] = []
-        self._chunk_indexes: list[ChunkIndex] = []
-        self._metadata_indexes: list[MetadataIndex] = []
-        self._attachment_indexes: list[AttachmentIndex] = []
+        # The summary's records, serialized (hil.logs.mcap_records); schema ids by content
+        self._schemas: dict[tuple[str, str, bytes], int] = {}
+        self._schema_records: list[bytes] = []
+        self._channel_records: list[bytes] = []
+        self._chunk_indexes: list[bytes] = []
+        self._metadata_indexes: list[bytes] = []
+        self._attachment_indexes: list[bytes] = []
         self._message_counts: dict[int, int] = {}
         self._time_range: tuple[int, int] | None = None
         self._metadata_count = 0
@@ -499,9 +487,7 @@ class McapLog:
         except OSError as exc:
             raise type(exc)(exc.errno, f"cannot create MCAP log: {exc.strerror}", str(self.path)) from None
         try:
-            rb = RecordBuilder()
-            Header(profile="", library=LIBRARY).write(rb)
-            self._write(MCAP_MAGIC + rb.end())
+            self._write(rec.MAGIC + rec.header("", LIBRARY))
             for name, data in (metadata or {}).items():
                 self.add_metadata(name, data)
         except BaseException:
@@ -557,23 +543,17 @@ class McapLog:
     # -- metadata and attachments -----------------------------------------------------------
     def add_metadata(self, name: str, data: Mapping[str, Any]) -> None:
         self._check_open()
-        rb = RecordBuilder()
-        Metadata(name=str(name), metadata=_string_map(name, data)).write(rb)
-        record = rb.end()
-        self._metadata_indexes.append(MetadataIndex(offset=self._pos, length=len(record), name=str(name)))
+        record = rec.metadata(str(name), _string_map(name, data))
+        self._metadata_indexes.append(rec.metadata_index(self._pos, len(record), str(name)))
         self._metadata_count += 1
         self._write(record)
 
     def add_attachment(self, name: str, data: bytes, media_type: str = "application/octet-stream",
                        log_time_ns: int = 0) -> None:
         self._check_open()
-        rb = RecordBuilder()
-        Attachment(create_time=0, log_time=log_time_ns, name=str(name), media_type=media_type,
-                   data=bytes(data)).write(rb)
-        record = rb.end()
-        self._attachment_indexes.append(AttachmentIndex(
-            offset=self._pos, length=len(record), log_time=log_time_ns, create_time=0,
-            data_size=len(data), name=str(name), media_type=media_type))
+        record = rec.attachment(log_time_ns, 0, str(name), media_type, bytes(data))
+        self._attachment_indexes.append(rec.attachment_index(
+            self._pos, len(record), log_time_ns, 0, len(data), str(name), media_type))
         self._write(record)
 
     # -- life cycle --------------------------------------------------------------------------
@@ -650,27 +630,25 @@ class McapLog:
 
     def _schema(self, name: str, encoding: str, data: bytes) -> int:
         key = (name, encoding, data)
-        schema = self._schemas.get(key)
-        if schema is None:
+        schema_id = self._schemas.get(key)
+        if schema_id is None:
             self._check_open()
-            schema = Schema(id=len(self._schemas) + 1, name=name, encoding=encoding, data=data)
-            self._schemas[key] = schema
-            rb = RecordBuilder()
-            schema.write(rb)
-            self._write(rb.end())
-        return schema.id
+            schema_id = len(self._schemas) + 1
+            record = rec.schema(schema_id, name, encoding, data)
+            self._write(record)
+            self._schemas[key] = schema_id
+            self._schema_records.append(record)
+        return schema_id
 
     def _channel(self, topic: str, message_encoding: str, schema_id: int) -> int:
         self._check_open()
         if topic in self._by_topic:
             raise ValueError(f"{self.path}: topic {topic} already has a channel")
-        channel = Channel(id=len(self._channel_records) + 1, topic=topic,
-                          message_encoding=message_encoding, schema_id=schema_id, metadata={})
-        rb = RecordBuilder()
-        channel.write(rb)
-        self._write(rb.end())
-        self._channel_records.append(channel)
-        return channel.id
+        channel_id = len(self._channel_records) + 1
+        record = rec.channel(channel_id, schema_id, topic, message_encoding, {})
+        self._write(record)
+        self._channel_records.append(record)
+        return channel_id
 
     def _register(self, channel):
         self._channels.append(channel)
@@ -697,7 +675,7 @@ class McapLog:
         compression = self.compression.encode()
         body_head = struct.pack(f"<QQQII{len(compression)}sQ", start, end, fill, raw_crc,
                                 len(compression), compression, len(data))
-        chunk_record = _RECORD_HEAD.pack(Opcode.CHUNK, len(body_head) + len(data)) + body_head
+        chunk_record = rec.HEAD.pack(rec.CHUNK, len(body_head) + len(data)) + body_head
         chunk_start = self._pos
         chunk_length = len(chunk_record) + len(data)
         parts = [chunk_record, data]
@@ -707,7 +685,7 @@ class McapLog:
             idx = c._index
             n = len(idx) // 2
             offsets[c.channel_id] = index_pos
-            record = (_RECORD_HEAD.pack(Opcode.MESSAGE_INDEX, 6 + 16 * n)
+            record = (rec.HEAD.pack(rec.MESSAGE_INDEX, 6 + 16 * n)
                       + struct.pack("<HI", c.channel_id, 16 * n) + _little_endian(idx))
             parts.append(record)
             index_pos += len(record)
@@ -715,52 +693,43 @@ class McapLog:
             c._index = _new_index()
         chunk.fill = 0
         self._write(b"".join(parts))
-        self._chunk_indexes.append(ChunkIndex(
-            message_start_time=start, message_end_time=end, chunk_start_offset=chunk_start,
-            chunk_length=chunk_length, message_index_offsets=offsets,
-            message_index_length=index_pos - chunk_start - chunk_length,
-            compression=self.compression, compressed_size=len(data), uncompressed_size=fill))
+        self._chunk_indexes.append(rec.chunk_index(
+            start, end, chunk_start, chunk_length, offsets, index_pos - chunk_start - chunk_length,
+            self.compression, len(data), fill))
         if self._time_range is None:
             self._time_range = (start, end)
         else:
             self._time_range = (min(start, self._time_range[0]), max(end, self._time_range[1]))
 
     def _write_summary(self) -> None:
-        rb = RecordBuilder()
-        DataEnd(data_section_crc=0).write(rb)  # CRC of the data section, patched below
-        data_end = bytearray(rb.end())
-        struct.pack_into("<I", data_end, 9, self._crc)
-        self._write(bytes(data_end))
-
+        self._write(rec.data_end(self._crc))       # the CRC of the data section up to here
         summary_start = self._pos
-        sb = RecordBuilder()
-        offsets: list[SummaryOffset] = []
+        parts: list[bytes] = []
+        offsets: list[bytes] = []
+        size = 0
 
-        def group(opcode: Opcode, records) -> None:
-            begin = sb.count
+        def group(opcode: int, records: list[bytes]) -> None:
+            nonlocal size
+            begin = size
             for record in records:
-                record.write(sb)
-            if sb.count > begin:
-                offsets.append(SummaryOffset(group_opcode=opcode, group_start=summary_start + begin,
-                                             group_length=sb.count - begin))
+                parts.append(record)
+                size += len(record)
+            if size > begin:
+                offsets.append(rec.summary_offset(opcode, summary_start + begin, size - begin))
 
         start, end = self._time_range or (0, 0)
-        stats = Statistics(
-            message_count=sum(self._message_counts.values()), schema_count=len(self._schemas),
-            channel_count=len(self._channel_records), attachment_count=len(self._attachment_indexes),
-            metadata_count=self._metadata_count, chunk_count=len(self._chunk_indexes),
-            message_start_time=start, message_end_time=end,
-            channel_message_counts=dict(self._message_counts))
-        group(Opcode.SCHEMA, self._schemas.values())
-        group(Opcode.CHANNEL, self._channel_records)
-        group(Opcode.STATISTICS, [stats])
-        group(Opcode.CHUNK_INDEX, self._chunk_indexes)
-        group(Opcode.ATTACHMENT_INDEX, self._attachment_indexes)
-        group(Opcode.METADATA_INDEX, self._metadata_indexes)
-        summary_offset_start = summary_start + sb.count
-        for offset in offsets:
-            offset.write(sb)
-        summary = sb.end()
-        footer_head = struct.pack("<BQQQ", Opcode.FOOTER, 20, summary_start, summary_offset_start)
+        stats = rec.statistics(
+            sum(self._message_counts.values()), len(self._schemas), len(self._channel_records),
+            len(self._attachment_indexes), self._metadata_count, len(self._chunk_indexes),
+            start, end, self._message_counts)
+        group(rec.SCHEMA, self._schema_records)
+        group(rec.CHANNEL, self._channel_records)
+        group(rec.STATISTICS, [stats])
+        group(rec.CHUNK_INDEX, self._chunk_indexes)
+        group(rec.ATTACHMENT_INDEX, self._attachment_indexes)
+        group(rec.METADATA_INDEX, self._metadata_indexes)
+        summary_offset_start = summary_start + size
+        summary = b"".join(parts + offsets)
+        footer_head = struct.pack("<BQQQ", rec.FOOTER, 20, summary_start, summary_offset_start)
         summary_crc = zlib.crc32(footer_head, zlib.crc32(summary))
-        self._write(summary + footer_head + struct.pack("<I", summary_crc) + MCAP_MAGIC)
+        self._write(summary + footer_head + struct.pack("<I", summary_crc) + rec.MAGIC)
