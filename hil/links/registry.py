@@ -27,12 +27,9 @@ its last stderr lines) for every error message.
 """
 from __future__ import annotations
 
+# subprocess, threading, termios, tty and shlex: imported by the functions that start a board
+# process; the in-process stub (every plan's default link) needs none of them.
 import os
-import shlex
-import subprocess
-import termios
-import threading
-import tty
 from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -103,6 +100,8 @@ class BoardConnection:
 
 
 def _stop_process(proc: subprocess.Popen, grace_s: float = 1.0) -> None:
+    import subprocess
+
     if proc.poll() is None:
         proc.terminate()
         try:
@@ -117,6 +116,9 @@ def _pty_pair() -> tuple[int, int, str]:
 
     The slave stays open until the bench's link has opened it too: a process reading a
     master whose slave nobody holds gets EIO and would take it for a hang-up."""
+    import termios
+    import tty
+
     master, slave = os.openpty()
     tty.setraw(slave, termios.TCSANOW)
     return master, slave, os.ttyname(slave)
@@ -126,6 +128,8 @@ class _StderrTail:
     """The last lines a board process wrote on stderr, read by a daemon thread."""
 
     def __init__(self, stream, keep: int = 50) -> None:
+        import threading
+
         self.lines: deque[str] = deque(maxlen=keep)
         self._lock = threading.Lock()
         self._thread = threading.Thread(target=self._read, args=(stream,), daemon=True)
@@ -171,6 +175,8 @@ def _exec_link(rest: str, spec: str) -> BoardConnection:
         raise LinkError(f"link '{spec}': executable '{path}' does not exist")
     if not os.access(path, os.X_OK):
         raise LinkError(f"link '{spec}': '{path}' is not executable (chmod +x?)")
+    import shlex
+
     try:
         args = shlex.split(options.get("args", ""))
     except ValueError as exc:
@@ -180,6 +186,8 @@ def _exec_link(rest: str, spec: str) -> BoardConnection:
 
 def spawn_on_pty(spec: str, argv: list[str], transport: str = "serial") -> BoardConnection:
     """Starts ``argv`` with stdin/stdout on a pseudo-terminal's master; the bench opens the slave."""
+    import subprocess
+
     master, slave, slave_path = _pty_pair()
     try:
         proc = subprocess.Popen(argv, stdin=master, stdout=master, stderr=subprocess.PIPE,
