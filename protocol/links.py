@@ -231,6 +231,22 @@ class SerialLink(Link):
         c.update(tx_frames=self.tx_frames, tx_bytes=self.tx_bytes, rx_bytes=self.rx_bytes)
         return c
 
+    # -- for a caller that reads and writes the descriptor itself (the bench's C period loop)
+    def descriptor(self) -> int | None:
+        """The open line's file descriptor (a device or a pseudo-terminal), None for a URL
+        port or once closed."""
+        return None if self._closed else self._fd
+
+    @property
+    def write_timeout_s(self) -> float:
+        return self._write_timeout_s
+
+    def count_direct(self, tx_frames: int, tx_bytes: int, rx_bytes: int) -> None:
+        """Adds what such a caller wrote (whole frames) and read to this link's counters."""
+        self.tx_frames += tx_frames
+        self.tx_bytes += tx_bytes
+        self.rx_bytes += rx_bytes
+
     @property
     def decoder(self) -> StreamDecoder:
         return self._decoder

@@ -5,11 +5,14 @@ Two kinds of evidence:
 - whole sessions with the stub, run once with the C loop and once with the Python loop only
   (exchange_periods set to None): the same signals bit for bit, the same raw frames and link
   counters, the same period count returned, for GATES (DTC) and DUTY (FOC) answers, a stop
-  condition, a COMMAND between runs and a per-period stimulus that is idle or not;
-- the loop alone, driven by a scripted board (a ctypes callback in hil_fw_exchange's place) and a
-  stand-in plant: every answer it must not take (stale, shoot-through, another kind, a STATUS,
-  none at all) is handed back at the right period with the rest of the answers queued, as the
-  Python loop would find them.
+  condition, a COMMAND between runs and a per-period stimulus that is idle or not, in process
+  and over a pseudo-terminal (stub-pty);
+- the loop alone, driven by a scripted board (a ctypes callback in hil_fw_exchange's place, or
+  the far end of a socket pair) and a stand-in plant: every answer it must not take (stale,
+  shoot-through, another kind, a STATUS, none at all) is handed back at the right period with
+  the rest of the answers queued, as the Python loop would find them; over a descriptor, the
+  answers read ahead are carried over, a frame split across reads waits in the partial
+  buffer, the answer wait is the SAMPLE's one deadline, and a closed line is a link error.
 """
 from __future__ import annotations
 
@@ -187,7 +190,7 @@ class _Rig:
 
 def test_plain_periods_are_taken_and_the_answers_after_gates_stay_queued():
     rig = _Rig({k: [Gates(k, 0b100001), _telemetry(k)] for k in range(1, 6)})
-    assert rig.run(5) == (5, 0)
+    assert rig.run(5) == (5, 0, None)
     assert rig.steps == [(k, 0b100001, None) for k in range(1, 6)]
     periods, truths, sensors, telemetry = rig.rows
     assert periods == [1, 2, 3, 4, 5] and truths[2] == (3 * 1e-4, 3.0)
@@ -199,7 +202,7 @@ def test_plain_periods_are_taken_and_the_answers_after_gates_stay_queued():
                                            for k in range(1, 6)), rig.counts[3], 0]
     # what inbox held at entry is taken first
     rig.answers[6] = [Gates(6, 0)]
-    assert rig.run(1) == (1, 0)
+    assert rig.run(1) == (1, 0, None)
     assert [m.period for m in rig.rows[3]][-1] == 5 and not rig.inbox
 
 
@@ -213,8 +216,8 @@ def test_plain_periods_are_taken_and_the_answers_after_gates_stay_queued():
 def test_an_answer_it_must_not_take_is_handed_back_at_its_period(why, answers):
     script = {1: [Gates(1, 0b100001)], 2: [Gates(2, 0b100001), _telemetry(2)], 3: answers}
     rig = _Rig(script)
-    done, state = rig.run(10)
-    assert (done, state) == (2, 2), why
+    done, state, extra = rig.run(10)
+    assert (done, state, extra) == (2, 2, None), why
     assert [s[0] for s in rig.steps] == [1, 2]
     # period 3 sampled, recorded and sent; its answers (TELEMETRY(2) first) wait in inbox
     assert rig.rows[0] == [1, 2, 3] and rig.counts[0] == 3
@@ -226,17 +229,118 @@ def test_an_answer_it_must_not_take_is_handed_back_at_its_period(why, answers):
 
 def test_duty_and_the_publish_boundary_and_stop():
     rig = _Rig({k: [Duty(k, (0, 32768, 65535))] for k in range(1, 20)}, publish_every=7)
-    assert rig.run(20, answer=1) == (6, 1)          # period 7 is the caller's (raw frames)
+    assert rig.run(20, answer=1) == (6, 1, None)         # period 7 is the caller's (raw frames)
     assert rig.steps[0] == (1, None, (0.0, 32768 / 65535.0, 1.0))
     rig.k = 8
-    assert rig.run(20, answer=1, stop=lambda: rig.k >= 10) == (2, 3)
-    assert rig.run(20, answer=0) == (0, 2)          # DUTY where GATES is the board's kind
+    assert rig.run(20, answer=1, stop=lambda: rig.k >= 10) == (2, 3, None)
+    assert rig.run(20, answer=0) == (0, 2, None)         # DUTY where GATES is the board's kind
 
 
 def test_batches_are_sealed_and_a_closed_instance_is_not_called():
     rig = _Rig({k: [Gates(k, 0)] for k in range(1, 12)}, batch=4)
-    assert rig.run(10) == (10, 0)
+    assert rig.run(10) == (10, 0, None)
     assert rig.sealed == 2 and rig.rows[0] == [9, 10]
     rig.counts[4] = 1
-    assert rig.run(1) == (0, 1)
+    assert rig.run(1) == (0, 1, None)
     assert rig.counts[0] == 10
+
+
+# ------------------------------------------------------------------ over a file descriptor
+
+def test_stub_pty_as_the_python_loop(tmp_path, monkeypatch):
+    """The descriptor kind: the stub in its own process behind a pseudo-terminal."""
+    def pty_run(s):
+        s.send_command(enable=True, speed_source="ekf", speed_ref_rpm=1500)
+        return s.run_periods(1200)
+
+    def on_pty(tmp, name, c_loop, mp, scenario):
+        from hil.session import BenchSession, SessionConfig
+        from hil.session.board_params import load_bench_profile
+
+        mp.setattr(ccodec, "exchange_periods", ccodec.exchange_periods if c_loop else None)
+        with BenchSession(load_bench_profile(), SessionConfig(link="stub-pty", seed=11)) as s:
+            returned = scenario(s)
+            s.drain()
+            signals = {n: v for n, (_, v, _) in s.recorder.arrays().items()}
+            counters = dict(s.tap.counters)
+            used = s.tap._direct_counts is not None and s.tap._direct_counts[0] > 0
+        mp.undo()
+        return signals, counters, returned, used
+    fast = on_pty(tmp_path, "c", True, monkeypatch, pty_run)
+    slow = on_pty(tmp_path, "py", False, monkeypatch, pty_run)
+    assert fast[3] and not slow[3]
+    assert [n for n in fast[0] if not np.array_equal(fast[0][n], slow[0][n], equal_nan=True)] == []
+    assert fast[1] == slow[1] and fast[2] == slow[2] == 1200
+
+
+class _FdRig(_Rig):
+    """The loop over one end of a socket pair; the test is the board at the other end."""
+
+    def __init__(self, answer_timeout_s=0.5, **kw):
+        import socket
+        super().__init__({}, **kw)
+        self.bench_end, self.board_end = socket.socketpair()
+        self.bench_end.setblocking(False)
+        self.partial = bytearray()
+        self.target = (self.bench_end.fileno(), answer_timeout_s, 0.5, ccodec.FrameEncoder(),
+                       ccodec.StreamDecoder(), bytearray(), bytearray(), self.counts, self.inbox,
+                       self.partial)
+
+    def answer(self, *msgs) -> bytes:
+        data = b"".join(self.board_encoder.encode(m) for m in msgs)
+        self.board_end.sendall(data)
+        return data
+
+    def samples(self):
+        self.board_end.setblocking(False)
+        try:
+            return [m.period for m in self.board_decoder.feed(self.board_end.recv(65536))]
+        except BlockingIOError:
+            return []
+
+    def close(self):
+        self.bench_end.close()
+        self.board_end.close()
+
+
+def test_answers_already_on_the_line_are_read_and_carried_over():
+    rig = _FdRig()
+    sent = b"".join(rig.answer(Gates(k, 0b100001), _telemetry(k)) for k in range(1, 6))
+    assert rig.run(5) == (5, 0, None)
+    assert rig.samples() == [1, 2, 3, 4, 5]
+    assert [s[0] for s in rig.steps] == [1, 2, 3, 4, 5]
+    assert [m.period for m in rig.rows[3]] == [1, 2, 3, 4]
+    # everything was read at once: what followed GATES(5) went back to inbox, in order
+    assert list(rig.inbox) == [_telemetry(5)]
+    assert (rig.counts[0], rig.counts[1], rig.counts[3]) == (5, 10, len(sent))
+    assert bytes(rig.target[6]) == sent and rig.partial == bytearray()
+    rig.close()
+
+
+def test_a_frame_split_across_reads_waits_in_the_partial_buffer():
+    rig = _FdRig(answer_timeout_s=0.05)
+    frame = rig.board_encoder.encode(Gates(1, 0b100001))
+    rig.board_end.sendall(frame[:5])
+    done, state, sent_at = rig.run(3)
+    assert (done, state) == (0, 2) and isinstance(sent_at, float)
+    assert rig.partial == frame[:5] and rig.rows[0] == [1] and not rig.target[6]
+    import time
+    assert time.monotonic() - sent_at >= 0.05          # it waited the whole answer time
+    rig.board_end.sendall(frame[5:])
+    assert rig.run(1) == (1, 0, None)                  # (SAMPLE(1) again, as a resend)
+    assert rig.steps == [(1, 0b100001, None)] and rig.partial == bytearray()
+    assert bytes(rig.target[6]) == frame
+    rig.close()
+
+
+def test_a_line_closed_by_the_board_is_a_link_error_after_the_record():
+    import errno
+    import socket
+    rig = _FdRig()
+    rig.board_end.shutdown(socket.SHUT_WR)
+    assert rig.run(3) == (0, 4, (0, "the other end closed the line"))
+    assert rig.rows[0] == [1] and not rig.steps
+    rig.board_end.close()
+    done, state, (code, what) = rig.run(3)
+    assert (done, state, what) == (0, 4, "write failed") and code == errno.EPIPE
+    rig.bench_end.close()

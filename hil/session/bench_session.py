@@ -42,7 +42,7 @@ RPM_PER_RAD_S = 60.0 / (2.0 * math.pi)
 # ccodec.exchange_periods: the answer kind it may take (a board's kind, once known), and the
 # states it ends in that this loop acts on
 _ANSWER_CODES = {Gates: 0, Duty: 1}
-_LOOP_PENDING, _LOOP_STOPPED = 2, 3
+_LOOP_PENDING, _LOOP_STOPPED, _LOOP_LINK_ERROR = 2, 3, 4
 _TRUTH_INDEX = {name: i for i, name in enumerate(TRUTH_FIELDS)}
 
 
@@ -468,27 +468,38 @@ class BenchSession:
         # steps, the same order, no Python frame) while nothing needs this loop: no mailbox or
         # live viewer, no per-period stimulus, the answer kind known and no miss being counted;
         # it hands back every period it does not take (see its docstring).
-        loop = exchange_periods = None
+        loop = None
+        direct = False
         rows = recorder.batch_lists()
-        if fast is not None:           # (the tap made it with the C codec: already imported)
-            from protocol.ccodec import exchange_periods
-        if (exchange_periods is not None and rows is not None
-                and mailbox is None and self.board_hello is not None
+        if (tap is not None and rows is not None and mailbox is None
+                and self.board_hello is not None
                 and (on_period is None or getattr(on_period, "idle", False))):
-            loop = (fast.args, plant.sample, plant.truth, plant.step, rows, recorder.seal,
-                    LOG_BATCH_PERIODS, publish_every)
+            target = tap.period_target(answer_timeout)
+            if target is not None:     # (the tap made it with the C codec: already imported)
+                from protocol.ccodec import exchange_periods
+                if exchange_periods is not None:
+                    loop = (target, plant.sample, plant.truth, plant.step, rows, recorder.seal,
+                            LOG_BATCH_PERIODS, publish_every)
+                    direct = len(target) == 10  # the descriptor kind (LinkTap.period_target)
         done = 0
         while done < count:
             pending = False          # period k sampled, recorded and sent by the C loop
-            if loop is not None and tap.fast_ready and not watchdog.consecutive:
+            sent_at = None           # when it went, over a descriptor (its answer wait runs)
+            if loop is not None and not watchdog.consecutive and \
+                    (tap.direct_ready if direct else tap.fast_ready):
                 answer = _ANSWER_CODES.get(self._answer_kind, -1)
-                ran, state = exchange_periods(*loop, count - done, stop, answer)
+                ran, state, extra = exchange_periods(*loop, count - done, stop, answer)
+                if direct:
+                    tap.settle_direct()
                 done += ran
                 if state == _LOOP_STOPPED:
                     return done
+                if state == _LOOP_LINK_ERROR:  # period k recorded, the plant not stepped
+                    self._link_failed(plant.period, tap.direct_failure(*extra))
                 if done >= count:
                     return count
                 pending = state == _LOOP_PENDING
+                sent_at = extra
             if mailbox is not None and mailbox.pending:
                 self._apply_mailbox(mailbox)
             sample = plant.sample()
@@ -523,7 +534,10 @@ class BenchSession:
                     # (a firmware in this process answers inside the call), from the first
                     # moment nothing is queued and the bench would wait: the queue is what was
                     # already received, so no clock is read while the answer is in it.
-                    deadline = None if inbox else clock() + answer_timeout
+                    if sent_at is not None and not attempt:
+                        deadline = sent_at + answer_timeout
+                    else:
+                        deadline = None if inbox else clock() + answer_timeout
                     if first_sent is None and deadline is not None:
                         first_sent = deadline - answer_timeout
                     if not recorded:

@@ -26,8 +26,10 @@ by their delimiters), with no per-frame Python call.
 """
 from __future__ import annotations
 
+import os
 import random
 import time
+from array import array
 from collections import deque
 from dataclasses import dataclass
 
@@ -92,6 +94,10 @@ class LinkTap:
         # them the last take_capture() already counted
         self._exchange_counts = None
         self._exchange_taken = (0, 0)
+        # the descriptor loop's own counts (period_target), and how much of them the link's
+        # counters already have
+        self._direct_counts = None
+        self._direct_settled = (0, 0, 0)
 
     # ---------------------------------------------------------------- faults
     def set_fault(self, name: str, fault: LinkFault) -> None:
@@ -228,6 +234,56 @@ class LinkTap:
             self._exchange_taken = (counts[0], counts[1])
         return make(ccodec.exchange_sample, self._encoder, self._decoder, self.captured["out"],
                     self.captured["in"], self.inbox)
+
+    def period_target(self, answer_timeout_s: float):
+        """What protocol.ccodec.exchange_periods drives this link through, or None where it
+        does not apply (another link, the Python codec): the in-process exchange's arguments
+        (sample_exchanger), or for a link with a file descriptor (SerialLink on a device or a
+        pseudo-terminal) the descriptor, the answer wait, the write timeout, this tap's codec,
+        captures, queue and partial-frame buffer, and counts of its own (frames out, frames
+        in, bytes out, bytes in), which settle_direct() hands to the link's counters. The
+        in-process kind runs while `fast_ready`, the descriptor kind while `direct_ready`."""
+        fast = self.sample_exchanger()
+        if fast is not None:
+            return fast.args
+        from protocol import ccodec
+
+        descriptor = getattr(self.link, "descriptor", None)
+        fd = descriptor() if descriptor is not None else None
+        if (fd is None or not ccodec.AVAILABLE
+                or not isinstance(self._encoder, ccodec.FrameEncoder)
+                or not isinstance(self._decoder, ccodec.StreamDecoder)):
+            return None
+        if self._direct_counts is None:
+            self._direct_counts = array("q", [0] * 5)
+            self._direct_settled = (0, 0, 0)
+        counts = self._direct_counts
+        if self._exchange_counts is not counts:
+            self._exchange_counts = counts
+            self._exchange_taken = (counts[0], counts[1])
+        return (fd, float(answer_timeout_s), float(self.link.write_timeout_s), self._encoder,
+                self._decoder, self.captured["out"], self.captured["in"], counts, self.inbox,
+                self._partial)
+
+    @property
+    def direct_ready(self) -> bool:
+        """No link fault and nothing held: the C loop may read and write the link's descriptor
+        itself (a half-read frame stays in the buffer it shares with this tap)."""
+        return not self.faults and not self._held and self.link.descriptor() is not None
+
+    def settle_direct(self) -> None:
+        """What the C loop wrote and read on the descriptor since the last call, added to the
+        link's own counters (its tx_frames, tx_bytes, rx_bytes)."""
+        counts = self._direct_counts
+        frames, out, inb = self._direct_settled
+        self.link.count_direct(counts[0] - frames, counts[2] - out, counts[3] - inb)
+        self._direct_settled = (counts[0], counts[2], counts[3])
+
+    def direct_failure(self, errno_value: int, what: str) -> ConnectionError:
+        """The C loop's I/O failure worded as SerialLink words it."""
+        detail = "" if what.startswith("the other end") or not errno_value else \
+            f": [Errno {errno_value}] {os.strerror(errno_value)}"
+        return ConnectionError(f"serial port '{self.url}': {what}{detail}")
 
     @property
     def fast_ready(self) -> bool:

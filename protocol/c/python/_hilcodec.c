@@ -22,7 +22,12 @@
 #include <Python.h>
 #include <structmember.h>
 
+#include <errno.h>
+#include <math.h>
+#include <poll.h>
 #include <string.h>
+#include <time.h>
+#include <unistd.h>
 
 #include "../hil_proto.h"
 
@@ -948,7 +953,7 @@ static int encode_sample_frame(const char *who, PyObject *const *fields, Encoder
 }
 
 #define LOOP_QUEUE 32
-enum { LOOP_DONE = 0, LOOP_HANDED = 1, LOOP_PENDING = 2, LOOP_STOPPED = 3 };
+enum { LOOP_DONE = 0, LOOP_HANDED = 1, LOOP_PENDING = 2, LOOP_STOPPED = 3, LOOP_LINK_ERROR = 4 };
 
 /* The answers queued between periods: decoded structs, or (at entry) inbox's message objects. */
 typedef struct {
@@ -1018,11 +1023,47 @@ static int append_new(PyObject *list, PyObject *item)
     return rc;
 }
 
+/* Decodes p[0:len] onto q, or as message objects onto the list *spill when q is NULL or once it
+ * is full (the list is then made here); then moves the decoder's counters into its totals. 0, or
+ * -1 with an exception (decoding goes on: the counters stay those of the whole input). */
+static int decode_onto(DecoderObject *dec, const uint8_t *p, size_t len, answer_queue *q, PyObject **spill)
+{
+    int rc = 0;
+    while (len > 0u) {
+        hil_msg a;
+        int got;
+        size_t used = hil_decoder_feed_buf(&dec->d, p, len, &a, &got);
+        p += used;
+        len -= used;
+        if (!got) {
+            continue;
+        }
+        if (*spill == NULL && q->n == LOOP_QUEUE) {   /* (no list yet: q is not NULL) */
+            /* more answers than a period ever has: from here on the queue is a list of
+             * message objects, and the caller takes the period */
+            *spill = PyList_New(0);
+            if (*spill == NULL || queue_to_list(q, *spill) < 0) {
+                rc = -1;
+            }
+        }
+        if (*spill != NULL) {
+            if (rc < 0 || append_new(*spill, message_object(&a)) < 0) {
+                rc = -1;
+            }
+            continue;
+        }
+        q->m[q->n] = a;
+        q->obj[q->n] = NULL;
+        q->n++;
+    }
+    decoder_collect(dec);
+    return rc;
+}
+
 /* One period's exchange with the firmware: SAMPLE from its six fields (encode_sample_frame),
  * through `exchange`, both directions captured and counted in counts[0..3], the answers decoded
- * onto q, or as message objects onto the list *spill when q is NULL or once it is full (the list
- * is then made here). 0, or -1 with an exception (decoding goes on: the counters stay those of
- * the whole input). Not inlined: bench/period_instructions.py counts it by name. */
+ * by decode_onto. 0, or -1 with an exception. Not inlined: bench/period_instructions.py counts it
+ * by name. */
 __attribute__((noinline))
 static int exchange_frames(const char *who, fw_exchange_fn exchange, void *fw, EncoderObject *enc,
                            DecoderObject *dec, PyObject *capture_out, PyObject *capture_in,
@@ -1043,36 +1084,9 @@ static int exchange_frames(const char *who, fw_exchange_fn exchange, void *fw, E
         if (append_bytes(capture_in, tx, n) < 0) {
             rc = -1;
         }
-        const uint8_t *p = tx;
-        size_t len = n;
-        while (len > 0u) {
-            hil_msg a;
-            int got;
-            size_t used = hil_decoder_feed_buf(&dec->d, p, len, &a, &got);
-            p += used;
-            len -= used;
-            if (!got) {
-                continue;
-            }
-            if (*spill == NULL && q->n == LOOP_QUEUE) {   /* (no list yet: q is not NULL) */
-                /* more answers than a period ever has: from here on the queue is a list of
-                 * message objects, and the caller takes the period */
-                *spill = PyList_New(0);
-                if (*spill == NULL || queue_to_list(q, *spill) < 0) {
-                    rc = -1;
-                }
-            }
-            if (*spill != NULL) {
-                if (rc < 0 || append_new(*spill, message_object(&a)) < 0) {
-                    rc = -1;    /* keep decoding: the counters stay those of the whole input */
-                }
-                continue;
-            }
-            q->m[q->n] = a;
-            q->obj[q->n] = NULL;
-            q->n++;
+        if (decode_onto(dec, tx, n, q, spill) < 0) {
+            rc = -1;
         }
-        decoder_collect(dec);
         if (n < sizeof tx) {
             break;
         }
@@ -1112,29 +1126,200 @@ static PyObject *exchange_period(void *fn_addr, void *fw, EncoderObject *enc, De
 
 PyDoc_STRVAR(exchange_periods_doc,
 "exchange_periods(target, sample, truth, step, rows, seal, batch, publish_every, count, stop,\n"
-"                 answer) -> (done, state)\n\n"
-"exchange_sample's period repeated in C for a run of plain lockstep periods, so no Python\n"
-"frame runs between them. target is exchange_sample's first eight arguments (exchange, fw,\n"
-"encoder, decoder, capture_out, capture_in, counts, inbox). Each period: s = sample() (a\n"
-"6-tuple: period k and the SAMPLE fields); SAMPLE(k) goes through the C exchange exactly as in\n"
-"exchange_sample, its answers decoded into a queue behind what inbox already held; the record:\n"
-"k, truth() and s[1:6] appended to rows = (periods, truths, sensors, telemetry), seal() once\n"
-"periods holds `batch`; then the queue is taken from its front as the bench's period loop takes\n"
-"its inbox: a TELEMETRY is appended to rows[3] as its message object, and the first GATES (answer\n"
-"0) or DUTY (answer 1) for period k, with no shoot-through, ends the period: step(gates) or\n"
-"step(duty=(d0/65535.0, d1/65535.0, d2/65535.0)), what follows it stays queued; then stop(), when\n"
-"given, may end the run. Anything else hands back to the caller. state: 0 `count` periods ran;\n"
-"1 the next period was not begun here (period k % publish_every == 0 or the instance closed:\n"
-"the caller runs it); 2 period k was sampled, recorded and sent, and inbox holds what is left\n"
-"of its answers from the first one not taken here (none: the firmware did not answer), which\n"
-"the caller handles; 3 stop() said stop. The queue left over always goes back to inbox as\n"
-"message objects, so the caller finds the state its own loop would have left.");
+"                 answer) -> (done, state, extra)\n\n"
+"The bench's lockstep period loop, in C, for a run of plain periods: no Python frame runs\n"
+"between them. target is either exchange_sample's first eight arguments (exchange, fw, encoder,\n"
+"decoder, capture_out, capture_in, counts, inbox: a firmware in this process), or ten for a\n"
+"serial line's file descriptor (fd, answer_timeout_s, write_timeout_s, encoder, decoder,\n"
+"capture_out, capture_in, counts, inbox, partial: the link tap's codec, captures, queue and\n"
+"partial-frame bytearray). Each period: s = sample() (a 6-tuple: period k and the SAMPLE\n"
+"fields); SAMPLE(k) is encoded and captured; in-process it goes through the firmware's\n"
+"exchange and its answers are decoded at once, over a descriptor it is written in full (within\n"
+"write_timeout_s) and the answers are read as they come (poll, read, without the GIL) until\n"
+"the period is taken or answer_timeout_s after the write has passed; the record: k, truth()\n"
+"and s[1:6] appended to rows = (periods, truths, sensors, telemetry), seal() once periods\n"
+"holds `batch` (over a descriptor made between the write and the wait, while the board\n"
+"computes); the answers are queued behind what inbox already held and taken from the front as\n"
+"the bench's period loop takes its inbox: a TELEMETRY is appended to rows[3] as its message\n"
+"object, and the first GATES (answer 0) or DUTY (answer 1) for period k, with no shoot-through,\n"
+"ends the period: step(gates) or step(duty=(d0/65535.0, d1/65535.0, d2/65535.0)), what follows\n"
+"it stays queued; then stop(), when given, may end the run. counts gains frames out, frames in,\n"
+"bytes out, bytes in. state: 0 `count` periods ran; 1 the next period was not begun here\n"
+"(k % publish_every == 0, or counts[4] set: the instance closed): the caller runs it; 2 period\n"
+"k was sampled, recorded and sent, and inbox holds what is left of its answers from the first\n"
+"one not taken here (none: no answer in time), for the caller to go on with, extra being when\n"
+"the SAMPLE was written (time.monotonic()) over a descriptor; 3 stop() said stop; 4 the\n"
+"descriptor failed (period k recorded, not stepped), extra = (errno, what). The queue left\n"
+"over always goes back to inbox as message objects, so the caller finds the state its own\n"
+"loop would have left; extra is None otherwise.");
 
 static PyObject *str_duty; /* "duty", interned at module init */
 
-static PyObject *loop_result(Py_ssize_t done, int state)
+/* ---- the descriptor transport: a serial line's file descriptor (a pty, a UART) */
+
+static double monotonic_s(void)
 {
-    return Py_BuildValue("(ni)", done, state);
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);   /* the clock of Python's time.monotonic() */
+    return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
+}
+
+/* Waits up to timeout_s for fd to be ready for `events`, without the GIL: 1 ready, 0 not, -1 errno. */
+static int fd_wait(int fd, short events, double timeout_s)
+{
+    struct pollfd pfd = {fd, events, 0};
+    double ms = ceil(timeout_s * 1e3);
+    int timeout_ms = ms <= 0.0 ? 0 : (ms > 1e9 ? 1000000000 : (int)ms);
+    int r;
+    Py_BEGIN_ALLOW_THREADS
+    r = poll(&pfd, 1, timeout_ms);
+    Py_END_ALLOW_THREADS
+    if (r < 0) {
+        return errno == EINTR ? 0 : -1;
+    }
+    return r > 0;
+}
+
+/* The whole frame into fd within write_timeout_s (a full line buffer is waited on, as
+ * SerialLink.send_bytes does): 0, or -1 with errno (ETIMEDOUT: the time ran out). */
+static int fd_write_all(int fd, const uint8_t *p, size_t n, double write_timeout_s)
+{
+    double deadline = -1.0;
+    while (n > 0u) {
+        ssize_t w;
+        Py_BEGIN_ALLOW_THREADS
+        w = write(fd, p, n);
+        Py_END_ALLOW_THREADS
+        if (w > 0) {
+            p += w;
+            n -= (size_t)w;
+            continue;
+        }
+        if (w < 0 && errno == EINTR) {
+            continue;
+        }
+        if (w < 0 && errno != EAGAIN && errno != EWOULDBLOCK) {
+            return -1;
+        }
+        double now = monotonic_s();
+        if (deadline < 0.0) {
+            deadline = now + write_timeout_s;
+        }
+        if (now >= deadline) {
+            errno = ETIMEDOUT;
+            return -1;
+        }
+        if (fd_wait(fd, POLLOUT, deadline - now) < 0) {
+            return -1;
+        }
+    }
+    return 0;
+}
+
+/* What LinkTap._take_in does with a read while no link fault is active: bytes after the last
+ * delimiter wait in `partial` (the tap's own buffer) for the rest of their frame; the complete
+ * frames are captured, counted by their delimiters and decoded onto q. 0, or -1 with an
+ * exception. */
+static int fd_take_in(const uint8_t *data, size_t n, PyObject *partial, DecoderObject *dec,
+                      PyObject *capture_in, int64_t *counts, answer_queue *q, PyObject **spill)
+{
+    counts[3] += (int64_t)n;
+    if (PyByteArray_GET_SIZE(partial) == 0 && data[n - 1] == 0u) {
+        counts[1] += (int64_t)count_delimiters(data, n);
+        int rc = append_bytes(capture_in, data, n);
+        return decode_onto(dec, data, n, q, spill) < 0 ? -1 : rc;
+    }
+    if (append_bytes(partial, data, n) < 0) {
+        return -1;
+    }
+    Py_ssize_t size = PyByteArray_GET_SIZE(partial);
+    uint8_t *buf = (uint8_t *)PyByteArray_AS_STRING(partial);
+    Py_ssize_t end = size - 1;
+    while (end >= 0 && buf[end] != 0u) {
+        end--;
+    }
+    if (end < 0) {
+        return 0;
+    }
+    size_t complete = (size_t)end + 1u;
+    counts[1] += (int64_t)count_delimiters(buf, complete);
+    int rc = append_bytes(capture_in, buf, complete);
+    if (decode_onto(dec, buf, complete, q, spill) < 0) {
+        rc = -1;
+    }
+    buf = (uint8_t *)PyByteArray_AS_STRING(partial);
+    memmove(buf, buf + complete, (size_t)size - complete);
+    if (PyByteArray_Resize(partial, size - (Py_ssize_t)complete) < 0) {
+        rc = -1;
+    }
+    return rc;
+}
+
+/* ---- the loop */
+
+/* The answers queued, taken from the front as BenchSession._run_lockstep takes its inbox: a
+ * TELEMETRY is appended to `telemetry` (as its object), and the first GATES (answer 0) or DUTY
+ * (answer 1) for period k with no shoot-through is taken into *gates or *duty. 1 taken; 0 the
+ * queue ran out first; 2 its front is an answer this loop does not take; -1 with an exception. */
+static int take_answers(answer_queue *q, unsigned long k, long answer, PyObject *telemetry,
+                        long *gates, uint16_t duty[3])
+{
+    while (q->head < q->n) {
+        int i = q->head;
+        const hil_msg *a = &q->m[i];
+        if (a->type == HIL_MSG_TELEMETRY) {
+            PyObject *o = q->obj[i];
+            q->obj[i] = NULL;
+            if (o == NULL) {
+                o = message_object(a);
+            }
+            if (append_new(telemetry, o) < 0) {
+                return -1;
+            }
+            q->head++;
+            continue;
+        }
+        if (a->type == HIL_MSG_GATES && answer == 0 && a->u.gates.period == (uint32_t)k &&
+            !(a->u.gates.gates & (a->u.gates.gates >> 1) & 0x15)) {
+            *gates = a->u.gates.gates;
+            q->head++;
+            return 1;
+        }
+        if (a->type == HIL_MSG_DUTY && answer == 1 && a->u.duty.period == (uint32_t)k) {
+            memcpy(duty, a->u.duty.duty, 3 * sizeof duty[0]);
+            q->head++;
+            return 1;
+        }
+        return 2;
+    }
+    return 0;
+}
+
+static PyObject *loop_result(Py_ssize_t done, int state, PyObject *extra)
+{
+    if (extra == NULL) {
+        return Py_BuildValue("(niO)", done, state, Py_None);
+    }
+    PyObject *r = Py_BuildValue("(niO)", done, state, extra);
+    Py_DECREF(extra);
+    return r;
+}
+
+/* The period's record, what Recorder.period appends: k, truth(), the sample's five fields. */
+static int record_period(PyObject *const *rows, PyObject *s, PyObject *truth, PyObject *seal, Py_ssize_t batch)
+{
+    if (PyList_Append(rows[0], PyTuple_GET_ITEM(s, 0)) < 0 || append_new(rows[1], PyObject_CallNoArgs(truth)) < 0 ||
+        append_new(rows[2], PyTuple_GetSlice(s, 1, 6)) < 0) {
+        return -1;
+    }
+    if (PyList_GET_SIZE(rows[0]) >= batch) {
+        PyObject *r = PyObject_CallNoArgs(seal);
+        if (r == NULL) {
+            return -1;
+        }
+        Py_DECREF(r);
+    }
+    return 0;
 }
 
 static PyObject *mod_exchange_periods(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
@@ -1147,20 +1332,21 @@ static PyObject *mod_exchange_periods(PyObject *self, PyObject *const *args, Py_
     if (!ready()) {
         return NULL;
     }
-    PyObject *target = args[0], *sample = args[1], *truth = args[2], *step = args[3], *rows = args[4];
+    PyObject *target = args[0], *sample = args[1], *truth = args[2], *step = args[3], *rows_arg = args[4];
     PyObject *seal = args[5], *stop = args[9];
-    if (!PyTuple_CheckExact(target) || PyTuple_GET_SIZE(target) != 8 || !PyTuple_CheckExact(rows) ||
-        PyTuple_GET_SIZE(rows) != 4) {
-        PyErr_SetString(PyExc_TypeError, "exchange_periods: target is exchange_sample's 8 first arguments, "
-                                         "rows a tuple of 4 lists");
+    Py_ssize_t tlen = PyTuple_CheckExact(target) ? PyTuple_GET_SIZE(target) : -1;
+    if ((tlen != 8 && tlen != 10) || !PyTuple_CheckExact(rows_arg) || PyTuple_GET_SIZE(rows_arg) != 4) {
+        PyErr_SetString(PyExc_TypeError, "exchange_periods: target is 8 (in-process) or 10 (descriptor) "
+                                         "values, rows a tuple of 4 lists");
         return NULL;
     }
-    PyObject *periods = PyTuple_GET_ITEM(rows, 0), *truths = PyTuple_GET_ITEM(rows, 1);
-    PyObject *sensors = PyTuple_GET_ITEM(rows, 2), *telemetry = PyTuple_GET_ITEM(rows, 3);
-    if (!PyList_CheckExact(periods) || !PyList_CheckExact(truths) || !PyList_CheckExact(sensors) ||
-        !PyList_CheckExact(telemetry)) {
-        PyErr_SetString(PyExc_TypeError, "exchange_periods: rows must be 4 lists");
-        return NULL;
+    PyObject *rows[4];
+    for (int i = 0; i < 4; i++) {
+        rows[i] = PyTuple_GET_ITEM(rows_arg, i);
+        if (!PyList_CheckExact(rows[i])) {
+            PyErr_SetString(PyExc_TypeError, "exchange_periods: rows must be 4 lists");
+            return NULL;
+        }
     }
     Py_ssize_t batch = PyLong_AsSsize_t(args[6]);
     Py_ssize_t publish_every = PyLong_AsSsize_t(args[7]);
@@ -1173,15 +1359,40 @@ static PyObject *mod_exchange_periods(PyObject *self, PyObject *const *args, Py_
         PyErr_SetString(PyExc_ValueError, "exchange_periods: batch and publish_every >= 1, count >= 0");
         return NULL;
     }
-    void *fn_addr = PyLong_AsVoidPtr(PyTuple_GET_ITEM(target, 0));
-    void *fw = PyLong_AsVoidPtr(PyTuple_GET_ITEM(target, 1));
-    if (PyErr_Occurred()) {
-        return NULL;
+    /* in-process: (exchange, fw, encoder, decoder, capture_out, capture_in, counts, inbox);
+     * descriptor: (fd, answer_timeout_s, write_timeout_s, encoder, decoder, capture_out,
+     *              capture_in, counts, inbox, partial) */
+    int by_fd = tlen == 10;
+    fw_exchange_fn exchange = NULL;
+    void *fw = NULL;
+    int fd = -1;
+    double answer_timeout_s = 0.0, write_timeout_s = 0.0;
+    PyObject *partial = NULL;
+    if (by_fd) {
+        fd = (int)PyLong_AsLong(PyTuple_GET_ITEM(target, 0));
+        answer_timeout_s = PyFloat_AsDouble(PyTuple_GET_ITEM(target, 1));
+        write_timeout_s = PyFloat_AsDouble(PyTuple_GET_ITEM(target, 2));
+        partial = PyTuple_GET_ITEM(target, 9);
+        if (PyErr_Occurred()) {
+            return NULL;
+        }
+        if (fd < 0 || !PyByteArray_CheckExact(partial)) {
+            PyErr_SetString(PyExc_TypeError, "exchange_periods: a descriptor target needs fd >= 0 and a "
+                                             "bytearray for the partial frame");
+            return NULL;
+        }
+    } else {
+        exchange = (fw_exchange_fn)(uintptr_t)PyLong_AsVoidPtr(PyTuple_GET_ITEM(target, 0));
+        fw = PyLong_AsVoidPtr(PyTuple_GET_ITEM(target, 1));
+        if (PyErr_Occurred()) {
+            return NULL;
+        }
     }
-    PyObject *enc_obj = PyTuple_GET_ITEM(target, 2), *dec_obj = PyTuple_GET_ITEM(target, 3);
-    PyObject *capture_out = PyTuple_GET_ITEM(target, 4), *capture_in = PyTuple_GET_ITEM(target, 5);
-    PyObject *inbox = PyTuple_GET_ITEM(target, 7);
-    if (fn_addr == NULL || fw == NULL || !PyObject_TypeCheck(enc_obj, &EncoderType) ||
+    Py_ssize_t base = by_fd ? 3 : 2;
+    PyObject *enc_obj = PyTuple_GET_ITEM(target, base), *dec_obj = PyTuple_GET_ITEM(target, base + 1);
+    PyObject *capture_out = PyTuple_GET_ITEM(target, base + 2), *capture_in = PyTuple_GET_ITEM(target, base + 3);
+    PyObject *inbox = PyTuple_GET_ITEM(target, base + 5);
+    if ((!by_fd && (exchange == NULL || fw == NULL)) || !PyObject_TypeCheck(enc_obj, &EncoderType) ||
         !PyObject_TypeCheck(dec_obj, &DecoderType) ||
         (capture_out != Py_None && !PyByteArray_CheckExact(capture_out)) ||
         (capture_in != Py_None && !PyByteArray_CheckExact(capture_in))) {
@@ -1189,7 +1400,7 @@ static PyObject *mod_exchange_periods(PyObject *self, PyObject *const *args, Py_
         return NULL;
     }
     Py_buffer counts_view;
-    if (PyObject_GetBuffer(PyTuple_GET_ITEM(target, 6), &counts_view, PyBUF_WRITABLE | PyBUF_C_CONTIGUOUS) < 0) {
+    if (PyObject_GetBuffer(PyTuple_GET_ITEM(target, base + 4), &counts_view, PyBUF_WRITABLE | PyBUF_C_CONTIGUOUS) < 0) {
         return NULL;
     }
     if (counts_view.len < (Py_ssize_t)(5 * sizeof(int64_t))) {
@@ -1200,12 +1411,12 @@ static PyObject *mod_exchange_periods(PyObject *self, PyObject *const *args, Py_
     int64_t *counts = (int64_t *)counts_view.buf;
     EncoderObject *enc = (EncoderObject *)enc_obj;
     DecoderObject *dec = (DecoderObject *)dec_obj;
-    fw_exchange_fn exchange = (fw_exchange_fn)(uintptr_t)fn_addr;
     PyTypeObject *telemetry_cls = classes[HIL_MSG_TELEMETRY].cls;
 
     answer_queue q;
     q.head = q.n = 0;
     PyObject *spill = NULL;
+    PyObject *extra = NULL;      /* the third value returned: when the SAMPLE went, or the I/O error */
     Py_ssize_t done = 0;
     int state = LOOP_DONE;
     int failed = 0;
@@ -1218,21 +1429,15 @@ static PyObject *mod_exchange_periods(PyObject *self, PyObject *const *args, Py_
         return NULL;
     }
     if (held > 0) {
-        if (held > LOOP_QUEUE / 2) {
-            PyBuffer_Release(&counts_view);
-            return loop_result(0, LOOP_HANDED);
+        PyObject *items = held > LOOP_QUEUE / 2 ? NULL : PySequence_List(inbox);
+        int all_telemetry = items != NULL;
+        for (Py_ssize_t i = 0; all_telemetry && i < held; i++) {
+            all_telemetry = Py_TYPE(PyList_GET_ITEM(items, i)) == telemetry_cls;
         }
-        PyObject *items = PySequence_List(inbox);
-        if (items == NULL) {
+        if (!all_telemetry) {
+            Py_XDECREF(items);
             PyBuffer_Release(&counts_view);
-            return NULL;
-        }
-        for (Py_ssize_t i = 0; i < held; i++) {
-            if (Py_TYPE(PyList_GET_ITEM(items, i)) != telemetry_cls) {
-                Py_DECREF(items);
-                PyBuffer_Release(&counts_view);
-                return loop_result(0, LOOP_HANDED);
-            }
+            return PyErr_Occurred() ? NULL : loop_result(0, LOOP_HANDED, NULL);
         }
         PyObject *r = PyObject_CallMethod(inbox, "clear", NULL);
         if (r == NULL) {
@@ -1265,8 +1470,7 @@ static PyObject *mod_exchange_periods(PyObject *self, PyObject *const *args, Py_
             failed = 1;
             break;
         }
-        PyObject *k_obj = PyTuple_GET_ITEM(s, 0);
-        unsigned long k = PyLong_AsUnsignedLong(k_obj);
+        unsigned long k = PyLong_AsUnsignedLong(PyTuple_GET_ITEM(s, 0));
         if (PyErr_Occurred()) {
             Py_DECREF(s);
             failed = 1;
@@ -1277,73 +1481,97 @@ static PyObject *mod_exchange_periods(PyObject *self, PyObject *const *args, Py_
             state = LOOP_HANDED;
             break;
         }
-        if (exchange_frames("exchange_periods", exchange, fw, enc, dec, capture_out, capture_in,
-                            &PyTuple_GET_ITEM(s, 0), counts, &q, &spill) < 0) {
-            Py_DECREF(s);
-            failed = 1;
-            break;
-        }
-        /* the record: what BenchSession's loop (and Recorder.period) appends */
-        if (PyList_Append(periods, k_obj) < 0 || append_new(truths, PyObject_CallNoArgs(truth)) < 0 ||
-            append_new(sensors, PyTuple_GetSlice(s, 1, 6)) < 0) {
-            Py_DECREF(s);
-            failed = 1;
-            break;
-        }
-        Py_DECREF(s);
-        if (PyList_GET_SIZE(periods) >= batch) {
-            PyObject *r = PyObject_CallNoArgs(seal);
-            if (r == NULL) {
+        double sent_at = 0.0;
+        int io_errno = 0;
+        const char *io_what = NULL;
+        if (by_fd) {
+            /* SAMPLE out; the record is made while the board computes; then its answers */
+            uint8_t frame[HIL_MAX_ENCODED_FRAME];
+            int n_frame = encode_sample_frame("exchange_periods", &PyTuple_GET_ITEM(s, 0), enc, capture_out, frame);
+            if (n_frame < 0) {
+                Py_DECREF(s);
                 failed = 1;
                 break;
             }
-            Py_DECREF(r);
-        }
-        if (spill != NULL) {                    /* a flood of answers: the caller's */
-            state = LOOP_PENDING;
+            if (fd_write_all(fd, frame, (size_t)n_frame, write_timeout_s) < 0) {
+                io_errno = errno;
+                io_what = io_errno == ETIMEDOUT ? "write timed out (nobody reading?)" : "write failed";
+            } else {
+                counts[0] += 1;
+                counts[2] += n_frame;
+            }
+            sent_at = monotonic_s();
+        } else if (exchange_frames("exchange_periods", exchange, fw, enc, dec, capture_out, capture_in,
+                                   &PyTuple_GET_ITEM(s, 0), counts, &q, &spill) < 0) {
+            Py_DECREF(s);
+            failed = 1;
             break;
         }
-        /* the answers, from the queue's front */
-        int taken = 0;
+        int rc = record_period(rows, s, truth, seal, batch);
+        Py_DECREF(s);
+        if (rc < 0) {
+            failed = 1;
+            break;
+        }
+        if (io_what != NULL) {
+            extra = Py_BuildValue("(is)", io_errno, io_what);
+            state = extra == NULL ? LOOP_DONE : LOOP_LINK_ERROR;
+            failed = extra == NULL;
+            break;
+        }
+        /* the answers, from the queue's front; over a descriptor, read as they come within the
+         * SAMPLE's one deadline */
         long gates = -1;
-        const uint16_t *duty = NULL;
-        while (q.head < q.n) {
-            int i = q.head;
-            const hil_msg *a = &q.m[i];
-            if (a->type == HIL_MSG_TELEMETRY) {
-                PyObject *o = q.obj[i];
-                q.obj[i] = NULL;
-                if (o == NULL) {
-                    o = message_object(a);
+        uint16_t duty[3] = {0, 0, 0};
+        int taken = spill != NULL ? 2 : take_answers(&q, k, answer, rows[3], &gates, duty);
+        while (by_fd && taken == 0) {
+            double left = sent_at + answer_timeout_s - monotonic_s();
+            int ready_now = left > 0.0 ? fd_wait(fd, POLLIN, left) : 0;
+            if (ready_now <= 0) {
+                if (ready_now < 0) {
+                    io_errno = errno;
+                    io_what = "read failed";
                 }
-                if (append_new(telemetry, o) < 0) {
-                    failed = 1;
-                    break;
-                }
-                q.head++;
+                break;                          /* the deadline: the caller's late handling */
+            }
+            uint8_t buf[4096];
+            ssize_t got;
+            Py_BEGIN_ALLOW_THREADS
+            got = read(fd, buf, sizeof buf);
+            Py_END_ALLOW_THREADS
+            if (got < 0 && (errno == EAGAIN || errno == EWOULDBLOCK || errno == EINTR)) {
                 continue;
             }
-            if (a->type == HIL_MSG_GATES && answer == 0 && a->u.gates.period == (uint32_t)k &&
-                !(a->u.gates.gates & (a->u.gates.gates >> 1) & 0x15)) {
-                gates = a->u.gates.gates;
-                taken = 1;
-                q.head++;
-            } else if (a->type == HIL_MSG_DUTY && answer == 1 && a->u.duty.period == (uint32_t)k) {
-                duty = a->u.duty.duty;
-                taken = 1;
-                q.head++;
+            if (got <= 0) {
+                io_errno = got < 0 ? errno : 0;
+                io_what = got == 0 || io_errno == EIO ? "the other end closed the line" : "read failed";
+                break;
             }
-            break;                              /* taken, or not one this loop takes */
+            if (fd_take_in(buf, (size_t)got, partial, dec, capture_in, counts, &q, &spill) < 0) {
+                taken = -1;
+                break;
+            }
+            taken = spill != NULL ? 2 : take_answers(&q, k, answer, rows[3], &gates, duty);
         }
-        if (failed) {
+        if (taken < 0) {
+            failed = 1;
             break;
         }
-        if (!taken) {
+        if (io_what != NULL) {
+            extra = Py_BuildValue("(is)", io_errno, io_what);
+            state = extra == NULL ? LOOP_DONE : LOOP_LINK_ERROR;
+            failed = extra == NULL;
+            break;
+        }
+        if (taken != 1) {
             state = LOOP_PENDING;
+            if (by_fd && (extra = PyFloat_FromDouble(sent_at)) == NULL) {
+                failed = 1;
+            }
             break;
         }
         PyObject *r;
-        if (duty != NULL) {
+        if (answer == 1) {
             PyObject *d = Py_BuildValue("(ddd)", duty[0] / 65535.0, duty[1] / 65535.0, duty[2] / 65535.0);
             if (d == NULL) {
                 failed = 1;
@@ -1364,9 +1592,6 @@ static PyObject *mod_exchange_periods(PyObject *self, PyObject *const *args, Py_
             break;
         }
         Py_DECREF(r);
-        if (q.head == q.n) {
-            q.head = q.n = 0;
-        }
         done++;
         if (stop != Py_None) {
             r = PyObject_CallNoArgs(stop);
@@ -1395,6 +1620,7 @@ static PyObject *mod_exchange_periods(PyObject *self, PyObject *const *args, Py_
     PyBuffer_Release(&counts_view);
     /* what is left of the queue goes back to inbox: the state the Python loop leaves */
     if (failed) {
+        Py_XDECREF(extra);
         PyObject *et, *ev, *tb;
         PyErr_Fetch(&et, &ev, &tb);
         if (queue_to_inbox(&q, spill, inbox) < 0) {
@@ -1404,9 +1630,10 @@ static PyObject *mod_exchange_periods(PyObject *self, PyObject *const *args, Py_
         return NULL;
     }
     if (queue_to_inbox(&q, spill, inbox) < 0) {
+        Py_XDECREF(extra);
         return NULL;
     }
-    return loop_result(done, state);
+    return loop_result(done, state, extra);
 }
 
 PyDoc_STRVAR(fields_into_doc,
