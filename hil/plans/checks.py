@@ -20,11 +20,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import field
 from typing import Any
 
 import numpy as np
 
+from hil.plans.dataclass_methods import dataclass
 from hil.plans.limits import Limits
 from hil.plans.outcome import CheckResult
 from hil.plans.verdict import Outcome

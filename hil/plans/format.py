@@ -15,12 +15,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import field
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any, ClassVar, Union
 
 
+from hil.plans.dataclass_methods import dataclass
 from hil.plans.checks import CHECK_KINDS, STATISTICS, ArgSpec, CheckKind, result_unit
 from hil.plans.limits import Limits
 from hil.plans.signals import SIGNAL_CATALOG

@@ -15,8 +15,8 @@ A value that is NaN (not computable) is not judged here: the check reports ERROR
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
+from hil.plans.dataclass_methods import dataclass
 from hil.plans.verdict import Outcome
 from hil.plans.units import UnitError, canonical, convert
 

@@ -14,10 +14,11 @@ The run record (`PlanResult.to_json`) is plain data for other tools.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import field
 from enum import Enum
 from typing import Any
 
+from hil.plans.dataclass_methods import dataclass
 from hil.plans.limits import Limits
 from hil.plans.verdict import CHECK_OUTCOMES, PLAN_OUTCOMES, STEP_OUTCOMES, Outcome
 

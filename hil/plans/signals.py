@@ -9,10 +9,10 @@ faults of issue 7 register their signals with `register_signal`).
 from __future__ import annotations
 
 from collections.abc import Iterable, Iterator, Mapping
-from dataclasses import dataclass
 
 import numpy as np
 
+from hil.plans.dataclass_methods import dataclass
 from hil.plans.units import canonical, convert
 
 _PLANT = {

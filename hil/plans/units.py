@@ -10,10 +10,11 @@ should state, not the unit table.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import TypeVar
 
 import numpy as np
+
+from hil.plans.dataclass_methods import dataclass
 
 ArrayOrFloat = TypeVar("ArrayOrFloat", float, np.ndarray)
 
