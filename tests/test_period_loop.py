@@ -144,7 +144,7 @@ class _Rig:
     """A scripted board (answers[k]: the messages it sends for SAMPLE(k)) and a stand-in plant
     (sample/truth/step on a period counter) around one exchange_periods call."""
 
-    def __init__(self, answers, publish_every=1000, batch=1000):
+    def __init__(self, answers, publish_every=1000, batch=1000, telemetry_rows=None):
         self.answers = answers
         self.k = 1
         self.steps = []
@@ -153,11 +153,34 @@ class _Rig:
         self.exchange = _EXCHANGE(self._board)
         self.counts = array("q", [0] * 5)
         self.inbox = deque()
-        self.rows = ([], [], [], [])
+        # the recorder's stage (Recorder.batch_stage) and what seal() took out of it
+        self.stage = (np.full((batch, 6), np.nan), np.full((batch, 2), np.nan),
+                      np.full((telemetry_rows or 2 * batch, 17), np.nan), np.zeros(2, np.int64))
+        self.sealed_rows = ([], [], [])
         self.sealed = 0
-        self.publish_every, self.batch = publish_every, batch
+        self.publish_every = publish_every
         self.target = (ctypes.cast(self.exchange, ctypes.c_void_p).value, 1, ccodec.FrameEncoder(),
                        ccodec.StreamDecoder(), bytearray(), bytearray(), self.counts, self.inbox)
+
+    def _rows(self, i):
+        fill = self.stage[3][0 if i < 2 else 1]
+        return self.sealed_rows[i] + [tuple(r) for r in self.stage[i][:fill].tolist()]
+
+    @property
+    def periods(self):
+        return [int(r[0]) for r in self._rows(0)]
+
+    @property
+    def sensors(self):
+        return [tuple(int(v) for v in r[1:]) for r in self._rows(0)]
+
+    @property
+    def truths(self):
+        return self._rows(1)
+
+    @property
+    def telemetry(self):
+        return self._rows(2)
 
     def _board(self, _fw, rx, rx_len, tx, tx_cap):
         if rx_len == 0:
@@ -180,30 +203,31 @@ class _Rig:
 
     def seal(self):
         self.sealed += 1
-        for rows in self.rows:
-            rows.clear()
+        for i in range(3):
+            self.sealed_rows[i].extend(self._rows(i)[len(self.sealed_rows[i]):])
+        self.stage[3][:] = 0
 
     def run(self, count, answer=0, stop=None):
-        return ccodec.exchange_periods(self.target, self.sample, self.truth, self.step, self.rows,
-                                       self.seal, self.batch, self.publish_every, count, stop, answer)
+        return ccodec.exchange_periods(self.target, self.sample, self.truth, self.step, self.stage,
+                                       self.seal, self.publish_every, count, stop, answer)
 
 
 def test_plain_periods_are_taken_and_the_answers_after_gates_stay_queued():
     rig = _Rig({k: [Gates(k, 0b100001), _telemetry(k)] for k in range(1, 6)})
     assert rig.run(5) == (5, 0, None)
     assert rig.steps == [(k, 0b100001, None) for k in range(1, 6)]
-    periods, truths, sensors, telemetry = rig.rows
-    assert periods == [1, 2, 3, 4, 5] and truths[2] == (3 * 1e-4, 3.0)
-    assert sensors[0] == (2048, 2050, 3000, 1, 0)
+    assert rig.periods == [1, 2, 3, 4, 5] and rig.truths[2] == (3 * 1e-4, 3.0)
+    assert rig.sensors[0] == (2048, 2050, 3000, 1, 0)
     # TELEMETRY(k) comes after GATES(k): taken at period k + 1, as the Python loop pops it
-    assert [m.period for m in telemetry] == [1, 2, 3, 4]
+    assert [r[0] for r in rig.telemetry] == [1, 2, 3, 4]
+    assert rig.telemetry[0] == (1.0, 1.0, 0.0, 1.0, 33.0) + (0.5,) * 12
     assert list(rig.inbox) == [_telemetry(5)]
     assert list(rig.counts) == [5, 10, sum(len(codec.FrameEncoder().encode(Sample(k, 2048, 2050, 3000, k, 0)))
                                            for k in range(1, 6)), rig.counts[3], 0]
     # what inbox held at entry is taken first
     rig.answers[6] = [Gates(6, 0)]
     assert rig.run(1) == (1, 0, None)
-    assert [m.period for m in rig.rows[3]][-1] == 5 and not rig.inbox
+    assert rig.telemetry[-1][0] == 5 and not rig.inbox
 
 
 @pytest.mark.parametrize("why, answers", [
@@ -220,10 +244,10 @@ def test_an_answer_it_must_not_take_is_handed_back_at_its_period(why, answers):
     assert (done, state, extra) == (2, 2, None), why
     assert [s[0] for s in rig.steps] == [1, 2]
     # period 3 sampled, recorded and sent; its answers (TELEMETRY(2) first) wait in inbox
-    assert rig.rows[0] == [1, 2, 3] and rig.counts[0] == 3
+    assert rig.periods == [1, 2, 3] and rig.counts[0] == 3
     # the TELEMETRY(2) queued behind GATES(2) was taken; from the first answer not taken on,
     # everything is left for the caller, in order
-    assert [m.period for m in rig.rows[3]] == [2]
+    assert [r[0] for r in rig.telemetry] == [2]
     assert list(rig.inbox) == answers
 
 
@@ -236,10 +260,19 @@ def test_duty_and_the_publish_boundary_and_stop():
     assert rig.run(20, answer=0) == (0, 2, None)         # DUTY where GATES is the board's kind
 
 
+def test_a_telemetry_flood_seals_the_batch_early():
+    rig = _Rig({k: [_telemetry(k), _telemetry(k), Gates(k, 0)] for k in range(1, 6)},
+               telemetry_rows=3)
+    assert rig.run(5) == (5, 0, None)
+    assert rig.sealed == 3 and rig.periods == [1, 2, 3, 4, 5]
+    assert [r[0] for r in rig.telemetry] == [1, 1, 2, 2, 3, 3, 4, 4, 5, 5]
+
+
 def test_batches_are_sealed_and_a_closed_instance_is_not_called():
     rig = _Rig({k: [Gates(k, 0)] for k in range(1, 12)}, batch=4)
     assert rig.run(10) == (10, 0, None)
-    assert rig.sealed == 2 and rig.rows[0] == [9, 10]
+    assert rig.sealed == 2 and rig.periods == list(range(1, 11))
+    assert rig.stage[3].tolist() == [2, 0]
     rig.counts[4] = 1
     assert rig.run(1) == (0, 1, None)
     assert rig.counts[0] == 10
@@ -309,7 +342,7 @@ def test_answers_already_on_the_line_are_read_and_carried_over():
     assert rig.run(5) == (5, 0, None)
     assert rig.samples() == [1, 2, 3, 4, 5]
     assert [s[0] for s in rig.steps] == [1, 2, 3, 4, 5]
-    assert [m.period for m in rig.rows[3]] == [1, 2, 3, 4]
+    assert [r[0] for r in rig.telemetry] == [1, 2, 3, 4]
     # everything was read at once: what followed GATES(5) went back to inbox, in order
     assert list(rig.inbox) == [_telemetry(5)]
     assert (rig.counts[0], rig.counts[1], rig.counts[3]) == (5, 10, len(sent))
@@ -323,7 +356,7 @@ def test_a_frame_split_across_reads_waits_in_the_partial_buffer():
     rig.board_end.sendall(frame[:5])
     done, state, sent_at = rig.run(3)
     assert (done, state) == (0, 2) and isinstance(sent_at, float)
-    assert rig.partial == frame[:5] and rig.rows[0] == [1] and not rig.target[6]
+    assert rig.partial == frame[:5] and rig.periods == [1] and not rig.target[6]
     import time
     assert time.monotonic() - sent_at >= 0.05          # it waited the whole answer time
     rig.board_end.sendall(frame[5:])
@@ -339,7 +372,7 @@ def test_a_line_closed_by_the_board_is_a_link_error_after_the_record():
     rig = _FdRig()
     rig.board_end.shutdown(socket.SHUT_WR)
     assert rig.run(3) == (0, 4, (0, "the other end closed the line"))
-    assert rig.rows[0] == [1] and not rig.steps
+    assert rig.periods == [1] and not rig.steps
     rig.board_end.close()
     done, state, (code, what) = rig.run(3)
     assert (done, state, what) == (0, 4, "write failed") and code == errno.EPIPE

@@ -1,9 +1,9 @@
 """Keeps every period's plant truth, sensor values, telemetry and commands.
 
-A period appends to plain lists (an append costs tens of nanoseconds; a TELEMETRY is kept as
-the message itself). Every `LOG_BATCH_PERIODS` periods the lists are sealed: each kind becomes a
-float64 block in one call of the C codec (protocol.ccodec.fields_into), the lists are emptied,
-and the run keeps the blocks for the checks at its end. With a log, the new blocks go to it at
+A period's rows go straight into a preallocated float64 stage: one C call a row from Python
+(protocol.ccodec.fields_into), or written by the C period loop itself (no Python object kept).
+Every `LOG_BATCH_PERIODS` periods the stage is sealed: copied into blocks the run keeps for its
+checks at its end, and emptied in place. With a log, the new blocks go to it at
 the same time (`FixedChannel.write_many`, numpy columns into the open chunk) instead of one
 Python call per message (cost per period: `python -m bench mcap_logging`). The log's crash
 bound grows by the batch: a SIGKILL loses the open chunk and at most the last 256 periods
@@ -15,13 +15,13 @@ board computed from that sample.
 from __future__ import annotations
 
 import math
-from itertools import chain
 from operator import attrgetter
 
 import numpy as np
 
 from plant_rt import TRUTH_FIELDS
 from protocol import ccodec
+from protocol.messages import Telemetry
 
 #: Periods between two batched writes of the full-rate channels to the log.
 LOG_BATCH_PERIODS = 256
@@ -38,39 +38,30 @@ COMMAND_FIELDS = ("enable", "speed_source", "speed_ref_rpm", "torque_mode", "tor
 STEP_SIGNALS = ("ctrl.fault_code", "fault.active_bits")
 
 
-#: The C codec's batch conversion of tuples or decoded messages into float64 rows, or None.
+#: The C codec's conversion of tuples or decoded messages into float64 rows, or None.
 _FIELDS_INTO = ccodec.fields_into if ccodec.AVAILABLE else None
-
-
-def _converted(rows: list, width: int, values) -> np.ndarray:
-    """`rows` as an (n, width) float64 array: by the C codec in one call (2-3 ns a value), or
-    by np.fromiter over `values()` (their values in order, 35 ns a value) when it is not built
-    or the rows are not all tuples or messages of one kind (a bench replay's numpy rows)."""
-    out = np.empty((len(rows), width), dtype=np.float64)
-    if _FIELDS_INTO is not None:
-        try:
-            _FIELDS_INTO(rows, out, 0)
-            return out
-        except TypeError:
-            pass
-    return np.fromiter(values(), dtype=np.float64, count=len(rows) * width).reshape(len(rows), width)
-
-
-def _rows_array(rows: list[tuple], width: int) -> np.ndarray:
-    """A list of equal-length tuples (truth, sensors) as an (n, width) float64 array."""
-    if rows and (len(rows[0]) != width or len(rows[-1]) != width):
-        raise ValueError(f"recorder: rows of {len(rows[0])} values where the log's channel has {width}")
-    return _converted(rows, width, lambda: chain.from_iterable(rows))
 
 
 #: A TELEMETRY as its row: the period, then TELEMETRY_FIELDS.
 telemetry_row = attrgetter("period", *TELEMETRY_FIELDS)
 
+#: Rows of the stage that TELEMETRY may fill before a batch is sealed early (a board sends at
+#: most one a period; twice the batch is room for one that sends more now and then).
+TELEMETRY_STAGE_ROWS = 2 * LOG_BATCH_PERIODS
+_TRUTH_WIDTH = len(TRUTH_FIELDS)
+_TELEMETRY_ROW_BYTES = 8 * (1 + len(TELEMETRY_FIELDS))
 
-def _telemetry_array(msgs: list) -> np.ndarray:
-    """TELEMETRY messages as (n, 1 + len(TELEMETRY_FIELDS)) float64 rows."""
-    return _converted(msgs, 1 + len(TELEMETRY_FIELDS),
-                      lambda: chain.from_iterable(map(telemetry_row, msgs)))
+
+def _put_row(stage: np.ndarray, n: int, values: tuple) -> None:
+    """values (ints and floats) as row n of a float64 stage: by the C codec in one call, or by
+    numpy (a value that is not a plain number: a bench replay's numpy scalars)."""
+    if _FIELDS_INTO is not None:
+        try:
+            _FIELDS_INTO([values], stage, n * stage.shape[1] * 8)
+            return
+        except TypeError:
+            pass
+    stage[n] = values
 
 
 def _log_times(periods, period_s: float) -> np.ndarray:
@@ -105,20 +96,25 @@ def unit_of(field: str) -> str:
 class Recorder:
     """Per-period rows, optionally mirrored to an McapLog.
 
-    A period appends to plain lists (the truth tuple, the sensor values, the TELEMETRY
-    message); every LOG_BATCH_PERIODS periods the lists are sealed into float64 blocks, one
-    C call per kind, and the new blocks go to the log. The run keeps blocks, not objects: 336
-    bytes a period instead of about 1.4 kB of tuples, floats and messages, which the garbage
-    collector would otherwise walk again and again and the run's end would free one by one.
+    A period's rows go straight into this batch's float64 stage (truth, sensors with the
+    period first, telemetry with the period first), preallocated once: one C call each from
+    Python (protocol.ccodec.fields_into), or written by the C period loop itself
+    (protocol.ccodec.exchange_periods, through `batch_stage`). Every LOG_BATCH_PERIODS periods
+    the stage is sealed: copied into blocks the run keeps for its checks and, with a log, sent
+    to it in one batch per channel. The run keeps blocks, not objects: 336 bytes a period
+    instead of about 1.4 kB of tuples, floats and messages, which the garbage collector would
+    otherwise walk again and again and the run's end would free one by one.
     """
 
     def __init__(self, period_s: float):
         self.period_s = period_s
-        # this batch's rows, as they came (a TELEMETRY as the decoded message)
-        self._periods: list[int] = []
-        self._truth: list[tuple] = []
-        self._sensors: list[tuple] = []
-        self._telemetry_msgs: list = []
+        # This batch's stage: sensors (period + SENSOR_FIELDS), truth (TRUTH_FIELDS) and
+        # telemetry (period + TELEMETRY_FIELDS) rows, and how many of each are filled. A
+        # batch seals at LOG_BATCH_PERIODS periods, or early if TELEMETRY floods it.
+        self._sensor_stage = np.empty((LOG_BATCH_PERIODS, 1 + len(SENSOR_FIELDS)))
+        self._truth_stage = np.empty((LOG_BATCH_PERIODS, len(TRUTH_FIELDS)))
+        self._telemetry_stage = np.empty((TELEMETRY_STAGE_ROWS, 1 + len(TELEMETRY_FIELDS)))
+        self._fill = np.zeros(2, dtype=np.int64)         # periods, telemetry rows
         # sealed batches: periods (int64), truth, sensors (period + SENSOR_FIELDS) and
         # telemetry (period + TELEMETRY_FIELDS) rows, float64
         self._period_blocks: list[np.ndarray] = []
@@ -153,52 +149,62 @@ class Recorder:
         log.before_flush(self.seal)
 
     def period(self, k: int, truth: tuple, sample) -> None:
-        periods = self._periods
-        periods.append(k)
-        self._truth.append(truth)
-        self._sensors.append((sample.adc_i1, sample.adc_i2, sample.adc_vdc, sample.encoder,
-                              sample.status))
-        if len(periods) >= LOG_BATCH_PERIODS:
+        fill = self._fill
+        n = int(fill[0])
+        if len(truth) != _TRUTH_WIDTH:
+            raise ValueError(f"recorder: rows of {len(truth)} values where the log's channel has "
+                             f"{_TRUTH_WIDTH}")
+        _put_row(self._truth_stage, n, truth)
+        _put_row(self._sensor_stage, n, (k, sample.adc_i1, sample.adc_i2, sample.adc_vdc,
+                                         sample.encoder, sample.status))
+        fill[0] = n + 1
+        if n + 1 >= LOG_BATCH_PERIODS:
             self.seal()
         live = self.live
         if live is not None and k % live.every == 0:
             live.period(k, truth, sample)
 
     def telemetry(self, msg) -> None:
-        self._telemetry_msgs.append(msg)
+        fill = self._fill
+        n = int(fill[1])
+        if _FIELDS_INTO is None or type(msg) is not Telemetry:
+            self._telemetry_stage[n] = telemetry_row(msg)
+        else:
+            _FIELDS_INTO([msg], self._telemetry_stage, n * _TELEMETRY_ROW_BYTES)
+        fill[1] = n + 1
+        if n + 1 >= TELEMETRY_STAGE_ROWS:
+            self.seal()
         live = self.live
         if live is not None and msg.period % live.every == 0:
             live.telemetry_row(telemetry_row(msg))
 
     @property
     def telemetry_sink(self):
-        """What takes the next TELEMETRY message: telemetry(), or the list's own append while
-        no live viewer follows (a period loop binds it once per run_periods: one Python call
-        fewer a period; the list is emptied in place when sealed, never replaced)."""
-        return self.telemetry if self.live is not None else self._telemetry_msgs.append
+        """What takes the next TELEMETRY message (a period loop binds it once per run)."""
+        return self.telemetry
 
-    def batch_lists(self) -> tuple[list, list, list, list] | None:
-        """This batch's four lists (periods, truth tuples, sensor tuples, TELEMETRY messages),
-        for a period loop in C (protocol.ccodec.exchange_periods) that appends to them what
-        period() and telemetry() would, and calls seal() once the periods list holds
-        LOG_BATCH_PERIODS; None while a live viewer follows (period() also feeds it). The
-        lists are emptied in place when sealed, never replaced."""
+    def batch_stage(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+        """This batch's stage (sensors, truth, telemetry rows, and the int64 fill counts) for
+        a period loop in C (protocol.ccodec.exchange_periods) that writes into it what period()
+        and telemetry() would and calls seal() when a part fills; None while a live viewer
+        follows (period() also feeds it). seal() empties the stage in place (the fill counts
+        to 0), never replacing its arrays."""
         if self.live is not None:
             return None
-        return self._periods, self._truth, self._sensors, self._telemetry_msgs
+        return self._sensor_stage, self._truth_stage, self._telemetry_stage, self._fill
 
     def seal(self) -> None:
         """This batch's rows become float64 blocks and, with a log, go to it (every
-        LOG_BATCH_PERIODS periods, and before the log flushes or closes)."""
+        LOG_BATCH_PERIODS periods, when TELEMETRY fills its stage, and before the log flushes
+        or closes)."""
         log = self._log
-        if self._periods:
-            periods = np.array(self._periods, dtype=np.int64)
-            truth = _rows_array(self._truth, len(TRUTH_FIELDS))
-            sensors = np.empty((len(periods), 1 + len(SENSOR_FIELDS)), dtype=np.float64)
-            sensors[:, 0] = periods
-            sensors[:, 1:] = _rows_array(self._sensors, len(SENSOR_FIELDS))
-            for rows in (self._periods, self._truth, self._sensors):
-                rows.clear()
+        fill = self._fill
+        n, m = int(fill[0]), int(fill[1])
+        fill[0] = fill[1] = 0
+        if n:
+            sensors = self._sensor_stage[:n].copy()
+            truth = self._truth_stage[:n].copy()
+            periods = sensors[:, 0].astype(np.int64)
             self._period_blocks.append(periods)
             self._truth_blocks.append(truth)
             self._sensor_blocks.append(sensors)
@@ -206,9 +212,8 @@ class Recorder:
                 t_ns = _log_times(periods, self.period_s)
                 self._truth_ch.write_many(t_ns, truth)
                 self._sensor_ch.write_many(t_ns, sensors)
-        if self._telemetry_msgs:
-            rows = _telemetry_array(self._telemetry_msgs)
-            self._telemetry_msgs.clear()
+        if m:
+            rows = self._telemetry_stage[:m].copy()
             self._telemetry_blocks.append(rows)
             if log is not None:
                 self._telemetry_ch.write_many(_log_times(rows[:, 0], self.period_s), rows)
@@ -216,48 +221,50 @@ class Recorder:
     @property
     def period_count(self) -> int:
         """Periods recorded (since the last clear())."""
-        return sum(map(len, self._period_blocks)) + len(self._periods)
+        return sum(map(len, self._period_blocks)) + int(self._fill[0])
 
     @property
     def periods(self) -> np.ndarray:
         """Every recorded period's number, int64, in order (made anew at each call)."""
-        return _joined(self._period_blocks, np.array(self._periods, dtype=np.int64), (0,), np.int64)
+        pending = self._sensor_stage[:int(self._fill[0]), 0].astype(np.int64)
+        return _joined(self._period_blocks, pending, (0,), np.int64)
 
     @property
     def truth_rows(self) -> np.ndarray:
         """(periods, TRUTH_FIELDS) float64 rows (made anew at each call; `latest_row` reads
         the newest at no cost)."""
-        width = len(TRUTH_FIELDS)
-        return _joined(self._truth_blocks, _rows_array(self._truth, width), (0, width))
+        return _joined(self._truth_blocks, self._truth_stage[:int(self._fill[0])],
+                       (0, _TRUTH_WIDTH))
 
     @property
     def sensor_rows(self) -> np.ndarray:
         """(periods, SENSOR_FIELDS) float64 rows (made anew at each call)."""
-        width = len(SENSOR_FIELDS)
-        return _joined([b[:, 1:] for b in self._sensor_blocks], _rows_array(self._sensors, width),
-                       (0, width))
+        return _joined([b[:, 1:] for b in self._sensor_blocks],
+                       self._sensor_stage[:int(self._fill[0]), 1:], (0, len(SENSOR_FIELDS)))
 
     @property
     def telemetry_rows(self) -> np.ndarray:
         """(TELEMETRY messages, period + TELEMETRY_FIELDS) float64 rows in arrival order, made
         anew at each call (a run's worth: milliseconds; `latest` reads the newest value)."""
-        return _joined(self._telemetry_blocks, _telemetry_array(self._telemetry_msgs),
+        return _joined(self._telemetry_blocks, self._telemetry_stage[:int(self._fill[1])],
                        (0, 1 + len(TELEMETRY_FIELDS)))
 
     def latest_row(self, group: str):
         """The newest truth, sensors or telemetry row (telemetry's starts with the period),
-        None before the first: for readers that poll while a run goes on (no copy)."""
+        None before the first: for readers that poll while a run goes on (a copy of one row:
+        the stage is written again)."""
+        n, m = int(self._fill[0]), int(self._fill[1])
         if group == "telemetry":
-            if self._telemetry_msgs:
-                return telemetry_row(self._telemetry_msgs[-1])
+            if m:
+                return self._telemetry_stage[m - 1].copy()
             blocks = self._telemetry_blocks
         elif group == "truth":
-            if self._truth:
-                return self._truth[-1]
+            if n:
+                return self._truth_stage[n - 1].copy()
             blocks = self._truth_blocks
         else:
-            if self._sensors:
-                return self._sensors[-1]
+            if n:
+                return self._sensor_stage[n - 1, 1:].copy()
             return self._sensor_blocks[-1][-1, 1:] if self._sensor_blocks else None
         return blocks[-1][-1] if blocks else None
 

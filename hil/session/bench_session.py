@@ -29,7 +29,7 @@ from protocol.messages import (
 )
 
 from hil.links.registry import BoardConnection, connect
-from hil.logs.recorder import COMMAND_FIELDS, LOG_BATCH_PERIODS, Recorder
+from hil.logs.recorder import COMMAND_FIELDS, Recorder
 from hil.session.board_params import board_parameters
 from hil.session.cpu_latency import CpuLatencyHold
 from hil.session.errors import SessionError
@@ -470,16 +470,16 @@ class BenchSession:
         # it hands back every period it does not take (see its docstring).
         loop = None
         direct = False
-        rows = recorder.batch_lists()
-        if (tap is not None and rows is not None and mailbox is None
+        stage = recorder.batch_stage()
+        if (tap is not None and stage is not None and mailbox is None
                 and self.board_hello is not None
                 and (on_period is None or getattr(on_period, "idle", False))):
             target = tap.period_target(answer_timeout)
             if target is not None:     # (the tap made it with the C codec: already imported)
                 from protocol.ccodec import exchange_periods
                 if exchange_periods is not None:
-                    loop = (target, plant.sample, plant.truth, plant.step, rows, recorder.seal,
-                            LOG_BATCH_PERIODS, publish_every)
+                    loop = (target, plant.sample, plant.truth, plant.step, stage, recorder.seal,
+                            publish_every)
                     direct = len(target) == 10  # the descriptor kind (LinkTap.period_target)
         done = 0
         while done < count:

@@ -1257,11 +1257,143 @@ static int fd_take_in(const uint8_t *data, size_t n, PyObject *partial, DecoderO
 
 /* ---- the loop */
 
+/* The recorder's stage (Recorder.batch_stage): sensors (period + 5 fields), truth and telemetry
+ * (period + 16 fields) rows of float64, and the int64 fill counts of periods and telemetry rows. */
+typedef struct {
+    Py_buffer view[4];
+    int held;                    /* views taken */
+    double *sensors, *truth, *telemetry;
+    int64_t *fill;
+    Py_ssize_t periods_cap, truth_width, telemetry_cap;
+    PyObject *seal;              /* empties the stage in place (fill to 0) */
+} stage_t;
+
+#define SENSOR_ROW 6
+#define TELEMETRY_ROW 17
+
+static void stage_release(stage_t *st)
+{
+    for (int i = 0; i < st->held; i++) {
+        PyBuffer_Release(&st->view[i]);
+    }
+    st->held = 0;
+}
+
+static int stage_take(stage_t *st, PyObject *stage, PyObject *seal)
+{
+    st->held = 0;
+    st->seal = seal;
+    if (!PyTuple_CheckExact(stage) || PyTuple_GET_SIZE(stage) != 4) {
+        PyErr_SetString(PyExc_TypeError, "exchange_periods: stage is (sensors, truth, telemetry, fill)");
+        return -1;
+    }
+    for (int i = 0; i < 4; i++) {
+        if (PyObject_GetBuffer(PyTuple_GET_ITEM(stage, i), &st->view[i], PyBUF_WRITABLE | PyBUF_C_CONTIGUOUS) < 0) {
+            stage_release(st);
+            return -1;
+        }
+        st->held++;
+    }
+    st->sensors = (double *)st->view[0].buf;
+    st->truth = (double *)st->view[1].buf;
+    st->telemetry = (double *)st->view[2].buf;
+    st->fill = (int64_t *)st->view[3].buf;
+    st->periods_cap = st->view[0].len / (Py_ssize_t)(SENSOR_ROW * sizeof(double));
+    st->truth_width = st->periods_cap > 0 ? st->view[1].len / st->periods_cap / (Py_ssize_t)sizeof(double) : 0;
+    st->telemetry_cap = st->view[2].len / (Py_ssize_t)(TELEMETRY_ROW * sizeof(double));
+    if (st->periods_cap < 1 || st->telemetry_cap < 1 || st->truth_width < 1 ||
+        st->view[1].len != st->periods_cap * st->truth_width * (Py_ssize_t)sizeof(double) ||
+        st->view[3].len < (Py_ssize_t)(2 * sizeof(int64_t)) || st->fill[0] < 0 || st->fill[1] < 0 ||
+        st->fill[0] >= st->periods_cap || st->fill[1] >= st->telemetry_cap) {
+        stage_release(st);
+        PyErr_SetString(PyExc_ValueError, "exchange_periods: the stage's arrays do not fit together");
+        return -1;
+    }
+    return 0;
+}
+
+/* seal() when a part of the stage is full; it must leave the stage empty. */
+static int stage_seal_if_full(stage_t *st)
+{
+    if (st->fill[0] < st->periods_cap && st->fill[1] < st->telemetry_cap) {
+        return 0;
+    }
+    PyObject *r = PyObject_CallNoArgs(st->seal);
+    if (r == NULL) {
+        return -1;
+    }
+    Py_DECREF(r);
+    if (st->fill[0] != 0 || st->fill[1] != 0) {
+        PyErr_SetString(PyExc_RuntimeError, "exchange_periods: seal() left the stage filled");
+        return -1;
+    }
+    return 0;
+}
+
+static int value_of(PyObject *v, double *d, Py_ssize_t r, const msg_class *mc, const char *field, Py_ssize_t i);
+
+/* The period's record, what Recorder.period writes: k and the sample's five fields, truth(). */
+static int record_period(stage_t *st, PyObject *s, PyObject *truth)
+{
+    int64_t n = st->fill[0];
+    double *row = st->sensors + (size_t)n * SENSOR_ROW;
+    for (Py_ssize_t i = 0; i < SENSOR_ROW; i++) {
+        if (value_of(PyTuple_GET_ITEM(s, i), &row[i], n, NULL, NULL, i) < 0) {
+            return -1;
+        }
+    }
+    PyObject *t = PyObject_CallNoArgs(truth);
+    if (t == NULL) {
+        return -1;
+    }
+    if (!PyTuple_Check(t) || PyTuple_GET_SIZE(t) != st->truth_width) {
+        Py_DECREF(t);
+        PyErr_Format(PyExc_ValueError, "recorder: truth() gave a row that is not %zd values", st->truth_width);
+        return -1;
+    }
+    row = st->truth + (size_t)n * (size_t)st->truth_width;
+    for (Py_ssize_t i = 0; i < st->truth_width; i++) {
+        if (value_of(PyTuple_GET_ITEM(t, i), &row[i], n, NULL, NULL, i) < 0) {
+            Py_DECREF(t);
+            return -1;
+        }
+    }
+    Py_DECREF(t);
+    st->fill[0] = n + 1;
+    return stage_seal_if_full(st);
+}
+
+/* A TELEMETRY, decoded (m) or as the message object it was queued as (obj), as Recorder.telemetry
+ * writes it: the period, then its fields. */
+static int record_telemetry(stage_t *st, const hil_msg *m, PyObject *obj)
+{
+    int64_t n = st->fill[1];
+    double *row = st->telemetry + (size_t)n * TELEMETRY_ROW;
+    if (obj != NULL) {
+        const msg_class *mc = &classes[HIL_MSG_TELEMETRY];
+        for (int i = 0; i < TELEMETRY_ROW; i++) {
+            if (value_of(SLOT(obj, mc->off[i]), &row[i], n, mc, field_names[HIL_MSG_TELEMETRY][i], i) < 0) {
+                return -1;
+            }
+        }
+    } else {
+        const hil_telemetry *t = &m->u.telemetry;
+        const double v[TELEMETRY_ROW] = {
+            t->period, t->sector, t->speed_source, t->state, t->gates,
+            t->speed_feedback_rad_s, t->speed_encoder_rad_s, t->speed_raw_rad_s, t->speed_lpf_rad_s,
+            t->speed_ekf_rad_s, t->flux_angle_rad, t->ekf_angle_rad, t->flux_mag_wb, t->torque_est_nm,
+            t->torque_ref_nm, t->rotor_pos_conv_rad, t->rotor_pos_ekf_rad};
+        memcpy(row, v, sizeof v);
+    }
+    st->fill[1] = n + 1;
+    return stage_seal_if_full(st);
+}
+
 /* The answers queued, taken from the front as BenchSession._run_lockstep takes its inbox: a
- * TELEMETRY is appended to `telemetry` (as its object), and the first GATES (answer 0) or DUTY
+ * TELEMETRY is written to the recorder's stage (record_telemetry), and the first GATES (answer 0) or DUTY
  * (answer 1) for period k with no shoot-through is taken into *gates or *duty. 1 taken; 0 the
  * queue ran out first; 2 its front is an answer this loop does not take; -1 with an exception. */
-static int take_answers(answer_queue *q, unsigned long k, long answer, PyObject *telemetry,
+static int take_answers(answer_queue *q, unsigned long k, long answer, stage_t *st,
                         long *gates, uint16_t duty[3])
 {
     while (q->head < q->n) {
@@ -1270,13 +1402,12 @@ static int take_answers(answer_queue *q, unsigned long k, long answer, PyObject 
         if (a->type == HIL_MSG_TELEMETRY) {
             PyObject *o = q->obj[i];
             q->obj[i] = NULL;
-            if (o == NULL) {
-                o = message_object(a);
-            }
-            if (append_new(telemetry, o) < 0) {
+            int rc = record_telemetry(st, a, o);
+            Py_XDECREF(o);
+            q->head++;
+            if (rc < 0) {
                 return -1;
             }
-            q->head++;
             continue;
         }
         if (a->type == HIL_MSG_GATES && answer == 0 && a->u.gates.period == (uint32_t)k &&
@@ -1305,58 +1436,31 @@ static PyObject *loop_result(Py_ssize_t done, int state, PyObject *extra)
     return r;
 }
 
-/* The period's record, what Recorder.period appends: k, truth(), the sample's five fields. */
-static int record_period(PyObject *const *rows, PyObject *s, PyObject *truth, PyObject *seal, Py_ssize_t batch)
-{
-    if (PyList_Append(rows[0], PyTuple_GET_ITEM(s, 0)) < 0 || append_new(rows[1], PyObject_CallNoArgs(truth)) < 0 ||
-        append_new(rows[2], PyTuple_GetSlice(s, 1, 6)) < 0) {
-        return -1;
-    }
-    if (PyList_GET_SIZE(rows[0]) >= batch) {
-        PyObject *r = PyObject_CallNoArgs(seal);
-        if (r == NULL) {
-            return -1;
-        }
-        Py_DECREF(r);
-    }
-    return 0;
-}
-
 static PyObject *mod_exchange_periods(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     (void)self;
-    if (nargs != 11) {
-        PyErr_SetString(PyExc_TypeError, "exchange_periods takes 11 arguments");
+    if (nargs != 10) {
+        PyErr_SetString(PyExc_TypeError, "exchange_periods takes 10 arguments");
         return NULL;
     }
     if (!ready()) {
         return NULL;
     }
-    PyObject *target = args[0], *sample = args[1], *truth = args[2], *step = args[3], *rows_arg = args[4];
-    PyObject *seal = args[5], *stop = args[9];
+    PyObject *target = args[0], *sample = args[1], *truth = args[2], *step = args[3];
+    PyObject *stage_arg = args[4], *seal = args[5], *stop = args[8];
     Py_ssize_t tlen = PyTuple_CheckExact(target) ? PyTuple_GET_SIZE(target) : -1;
-    if ((tlen != 8 && tlen != 10) || !PyTuple_CheckExact(rows_arg) || PyTuple_GET_SIZE(rows_arg) != 4) {
-        PyErr_SetString(PyExc_TypeError, "exchange_periods: target is 8 (in-process) or 10 (descriptor) "
-                                         "values, rows a tuple of 4 lists");
+    if (tlen != 8 && tlen != 10) {
+        PyErr_SetString(PyExc_TypeError, "exchange_periods: target is 8 (in-process) or 10 (descriptor) values");
         return NULL;
     }
-    PyObject *rows[4];
-    for (int i = 0; i < 4; i++) {
-        rows[i] = PyTuple_GET_ITEM(rows_arg, i);
-        if (!PyList_CheckExact(rows[i])) {
-            PyErr_SetString(PyExc_TypeError, "exchange_periods: rows must be 4 lists");
-            return NULL;
-        }
-    }
-    Py_ssize_t batch = PyLong_AsSsize_t(args[6]);
-    Py_ssize_t publish_every = PyLong_AsSsize_t(args[7]);
-    Py_ssize_t count = PyLong_AsSsize_t(args[8]);
-    long answer = PyLong_AsLong(args[10]);
+    Py_ssize_t publish_every = PyLong_AsSsize_t(args[6]);
+    Py_ssize_t count = PyLong_AsSsize_t(args[7]);
+    long answer = PyLong_AsLong(args[9]);
     if (PyErr_Occurred()) {
         return NULL;
     }
-    if (batch < 1 || publish_every < 1 || count < 0) {
-        PyErr_SetString(PyExc_ValueError, "exchange_periods: batch and publish_every >= 1, count >= 0");
+    if (publish_every < 1 || count < 0) {
+        PyErr_SetString(PyExc_ValueError, "exchange_periods: publish_every >= 1, count >= 0");
         return NULL;
     }
     /* in-process: (exchange, fw, encoder, decoder, capture_out, capture_in, counts, inbox);
@@ -1409,6 +1513,11 @@ static PyObject *mod_exchange_periods(PyObject *self, PyObject *const *args, Py_
         return NULL;
     }
     int64_t *counts = (int64_t *)counts_view.buf;
+    stage_t st;
+    if (stage_take(&st, stage_arg, seal) < 0) {
+        PyBuffer_Release(&counts_view);
+        return NULL;
+    }
     EncoderObject *enc = (EncoderObject *)enc_obj;
     DecoderObject *dec = (DecoderObject *)dec_obj;
     PyTypeObject *telemetry_cls = classes[HIL_MSG_TELEMETRY].cls;
@@ -1426,6 +1535,7 @@ static PyObject *mod_exchange_periods(PyObject *self, PyObject *const *args, Py_
     Py_ssize_t held = PyObject_Length(inbox);
     if (held < 0) {
         PyBuffer_Release(&counts_view);
+        stage_release(&st);
         return NULL;
     }
     if (held > 0) {
@@ -1437,12 +1547,14 @@ static PyObject *mod_exchange_periods(PyObject *self, PyObject *const *args, Py_
         if (!all_telemetry) {
             Py_XDECREF(items);
             PyBuffer_Release(&counts_view);
+            stage_release(&st);
             return PyErr_Occurred() ? NULL : loop_result(0, LOOP_HANDED, NULL);
         }
         PyObject *r = PyObject_CallMethod(inbox, "clear", NULL);
         if (r == NULL) {
             Py_DECREF(items);
             PyBuffer_Release(&counts_view);
+            stage_release(&st);
             return NULL;
         }
         Py_DECREF(r);
@@ -1507,7 +1619,7 @@ static PyObject *mod_exchange_periods(PyObject *self, PyObject *const *args, Py_
             failed = 1;
             break;
         }
-        int rc = record_period(rows, s, truth, seal, batch);
+        int rc = record_period(&st, s, truth);
         Py_DECREF(s);
         if (rc < 0) {
             failed = 1;
@@ -1523,7 +1635,7 @@ static PyObject *mod_exchange_periods(PyObject *self, PyObject *const *args, Py_
          * SAMPLE's one deadline */
         long gates = -1;
         uint16_t duty[3] = {0, 0, 0};
-        int taken = spill != NULL ? 2 : take_answers(&q, k, answer, rows[3], &gates, duty);
+        int taken = spill != NULL ? 2 : take_answers(&q, k, answer, &st, &gates, duty);
         while (by_fd && taken == 0) {
             double left = sent_at + answer_timeout_s - monotonic_s();
             int ready_now = left > 0.0 ? fd_wait(fd, POLLIN, left) : 0;
@@ -1551,7 +1663,7 @@ static PyObject *mod_exchange_periods(PyObject *self, PyObject *const *args, Py_
                 taken = -1;
                 break;
             }
-            taken = spill != NULL ? 2 : take_answers(&q, k, answer, rows[3], &gates, duty);
+            taken = spill != NULL ? 2 : take_answers(&q, k, answer, &st, &gates, duty);
         }
         if (taken < 0) {
             failed = 1;
@@ -1618,6 +1730,7 @@ static PyObject *mod_exchange_periods(PyObject *self, PyObject *const *args, Py_
         }
     }
     PyBuffer_Release(&counts_view);
+    stage_release(&st);
     /* what is left of the queue goes back to inbox: the state the Python loop leaves */
     if (failed) {
         Py_XDECREF(extra);
