@@ -6,7 +6,9 @@ value is reported the same way, with the file, the line and the key:
 - `source`: safe YAML loading that keeps the line of every key (`load_yaml`, `ConfigError`);
 - `fields`: parameter fields declared on dataclasses with bounds (`param`, `coerce`);
 - `schema`: structure checks, declared as JSON Schema and run on a located document
-  (`SchemaChecker`); a parameter dataclass gives its schema with `dataclass_schema`.
+  (`SchemaChecker`); a parameter dataclass gives its schema with `dataclass_schema`;
+- `dataclass_methods`: the standard dataclass decorator without compiled __repr__, __eq__ and
+  __hash__ (the start-up of every class the bench imports).
 
 It knows nothing of motors or boards: the physics and the bench both sit above it.
 """

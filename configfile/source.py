@@ -8,12 +8,14 @@ build Python objects, no code from a file is ever evaluated.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import field
 from pathlib import Path
 from typing import Any
 
 import yaml
 import yaml.constructor
+
+from configfile.dataclass_methods import dataclass
 
 KeyPath = tuple[Any, ...]
 

@@ -8,9 +8,11 @@ version does not name (a future parameter id, say) pass through unguessed.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import fields
 from enum import IntEnum
 from typing import ClassVar
+
+from configfile.dataclass_methods import dataclass
 
 PROTOCOL_VERSION = 1
 NAME_MAX = 40

@@ -1,6 +1,6 @@
-"""hil.plans.dataclass_methods.dataclass gives the results of the standard dataclass: the same
+"""configfile.dataclass_methods.dataclass gives the results of the standard dataclass: the same
 repr (recursion included), ==, hash (or none), frozen-ness, fields, replace and match args,
-for every shape of class the plans declare and for each of hil.plans' own classes."""
+for every shape of class declared with it and for each class of the modules that use it."""
 from __future__ import annotations
 
 import dataclasses
@@ -10,11 +10,13 @@ from typing import ClassVar
 
 import pytest
 
-from hil.plans import dataclass_methods
-from hil.plans.dataclass_methods import dataclass as lean
+from configfile import dataclass_methods
+from configfile.dataclass_methods import dataclass as lean
 
-PLAN_MODULES = ("hil.plans.checks", "hil.plans.format", "hil.plans.limits", "hil.plans.outcome",
-                "hil.plans.signals", "hil.plans.units")
+MODULES = ("hil.plans.checks", "hil.plans.format", "hil.plans.limits", "hil.plans.outcome",
+           "hil.plans.signals", "hil.plans.units", "hil.session.policy", "protocol.messages",
+           "configfile.source", "hil.faults.injector", "hil.links.registry", "hil.run.console",
+           "hil.run.runner")
 
 
 def _pair(namespace: dict, bases: tuple = (), **kwargs):
@@ -105,24 +107,24 @@ def test_what_it_does_not_take():
         lean(type("A", (), {"__annotations__": {}, "__eq__": lambda s, o: True}))
 
 
-def _plan_classes():
-    for module in PLAN_MODULES:
+def _classes():
+    for module in MODULES:
         mod = importlib.import_module(module)
         for obj in vars(mod).values():
             if isinstance(obj, type) and obj.__module__ == module and dataclasses.is_dataclass(obj):
                 yield obj
 
 
-def test_every_plan_dataclass_is_made_by_it():
-    classes = list(_plan_classes())
-    assert len(classes) >= 27
+def test_every_dataclass_of_those_modules_is_made_by_it():
+    classes = list(_classes())
+    assert len(classes) >= 48
     generated = [c.__qualname__ for c in classes
                  if c.__dataclass_params__.repr or c.__dataclass_params__.eq]
     assert not generated, f"compiled by the standard decorator: {generated}"
 
 
-@pytest.mark.parametrize("cls", list(_plan_classes()), ids=lambda c: c.__qualname__)
-def test_plan_classes_behave_as_the_standard_decorator_would_make_them(cls):
+@pytest.mark.parametrize("cls", list(_classes()), ids=lambda c: c.__qualname__)
+def test_each_class_behaves_as_the_standard_decorator_would_make_it(cls):
     """A twin of each class from the standard decorator (same fields, same flags) gives the
     same repr, == and hash for the same field values."""
     fields = dataclasses.fields(cls)

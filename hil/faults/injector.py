@@ -19,12 +19,13 @@ the plant is told: the board must notice by itself, which is the point.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import field
 from types import MappingProxyType
 from typing import Any, Callable, Mapping
 
 from hil.session.link_tap import LinkFault
 from hil.faults.catalog import FAULTS
+from configfile.dataclass_methods import dataclass
 from configfile.schema import schema_accepts
 
 #: Modbus ``fault_injection`` bit -> (fault, arguments used when switched from Modbus).

@@ -31,11 +31,12 @@ from __future__ import annotations
 # process; the in-process stub (every plan's default link) needs none of them.
 import os
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import field
 from pathlib import Path
 from typing import Any, Callable
 from urllib.parse import parse_qsl
 
+from configfile.dataclass_methods import dataclass
 from protocol.links import Link, LinkError, open_link
 from protocol.messages import Role
 

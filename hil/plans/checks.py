@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from hil.plans.dataclass_methods import dataclass
+from configfile.dataclass_methods import dataclass
 from hil.plans.limits import Limits
 from hil.plans.outcome import CheckResult
 from hil.plans.verdict import Outcome

@@ -21,7 +21,7 @@ from types import MappingProxyType
 from typing import Any, ClassVar, Union
 
 
-from hil.plans.dataclass_methods import dataclass
+from configfile.dataclass_methods import dataclass
 from hil.plans.checks import CHECK_KINDS, STATISTICS, ArgSpec, CheckKind, result_unit
 from hil.plans.limits import Limits
 from hil.plans.signals import SIGNAL_CATALOG

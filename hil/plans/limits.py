@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 
-from hil.plans.dataclass_methods import dataclass
+from configfile.dataclass_methods import dataclass
 from hil.plans.verdict import Outcome
 from hil.plans.units import UnitError, canonical, convert
 

@@ -18,7 +18,7 @@ from dataclasses import field
 from enum import Enum
 from typing import Any
 
-from hil.plans.dataclass_methods import dataclass
+from configfile.dataclass_methods import dataclass
 from hil.plans.limits import Limits
 from hil.plans.verdict import CHECK_OUTCOMES, PLAN_OUTCOMES, STEP_OUTCOMES, Outcome
 

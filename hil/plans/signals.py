@@ -12,7 +12,7 @@ from collections.abc import Iterable, Iterator, Mapping
 
 import numpy as np
 
-from hil.plans.dataclass_methods import dataclass
+from configfile.dataclass_methods import dataclass
 from hil.plans.units import canonical, convert
 
 _PLANT = {

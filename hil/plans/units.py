@@ -14,7 +14,7 @@ from typing import TypeVar
 
 import numpy as np
 
-from hil.plans.dataclass_methods import dataclass
+from configfile.dataclass_methods import dataclass
 
 ArrayOrFloat = TypeVar("ArrayOrFloat", float, np.ndarray)
 

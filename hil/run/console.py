@@ -17,7 +17,8 @@ from __future__ import annotations
 import sys
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+
+from configfile.dataclass_methods import dataclass
 
 #: kind -> the words for one of it (the events of hil.session.bench_session and realtime)
 LABELS = {

@@ -18,7 +18,7 @@ import functools
 import math
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import field
 from pathlib import Path
 from typing import Any, Callable, Iterable
 
@@ -35,6 +35,7 @@ from hil.logs.recorder import SENSOR_FIELDS, TELEMETRY_FIELDS, COMMAND_FIELDS
 from hil.reports.html import slug, write_reports, write_summary
 from hil.session.bench_session import BenchSession, SessionConfig, SessionError
 from hil.plans.signals import SignalSet
+from configfile.dataclass_methods import dataclass
 from configfile.source import ConfigError
 
 PROGRESS_CHUNK_S = 0.01  # simulated seconds between progress updates and wall-clock checks

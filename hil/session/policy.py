@@ -4,9 +4,10 @@ its schema (JSON Schema, configfile.schema) is checked when the profile loads, w
 line and key of a bad value."""
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import fields
 from typing import Any
 
+from configfile.dataclass_methods import dataclass
 from configfile.schema import NON_NEGATIVE, POSITIVE, POSITIVE_INT, obj
 
 CAPABILITY_NAMES = ("GATES", "DUTY", "TELEMETRY", "CAN")

@@ -1,15 +1,16 @@
-"""The plan's dataclasses, with __repr__, __eq__ and __hash__ made as closures instead of
-compiled for each class.
+"""Dataclasses with __repr__, __eq__ and __hash__ made as closures instead of compiled for
+each class.
 
 Python 3.11's dataclasses compile each generated method from source text: six for a frozen
-class, ~3.1 M instructions, and hil.plans builds 27 classes when `hil run` imports it.
-`dataclass` here is the standard decorator (same arguments; order and unsafe_hash are not
-taken) that leaves repr and eq to closures over the field names, which behave as the
-generated methods do: the same text (recursion shown as ...), == on the tuples of the
-compared fields of two instances of the same class, hash of the hashed fields' tuple for a
-frozen class and no hash for a mutable one. __init__, and a frozen class's __setattr__ and
-__delattr__, are the standard ones. Only __dataclass_params__ tells the difference (its repr
-and eq are False). tests/test_dataclass_methods.py holds the two to the same results.
+class, ~3.1 M instructions, and `hil run` imports some sixty dataclasses (the plan format,
+the protocol's messages, ...). `dataclass` here is the standard decorator (same arguments;
+order and unsafe_hash are not taken) that leaves repr and eq to closures over the field
+names, which behave as the generated methods do: the same text (recursion shown as ...),
+== on the tuples of the compared fields of two instances of the same class, hash of the
+hashed fields' tuple for a frozen class and no hash for a mutable one. __init__, and a frozen
+class's __setattr__ and __delattr__, are the standard ones. Only __dataclass_params__ tells
+the difference (its repr and eq are False). tests/test_dataclass_methods.py holds the two to
+the same results.
 """
 from __future__ import annotations
 
@@ -31,7 +32,7 @@ def _tuple_of(names: tuple[str, ...]):
 def dataclass(cls=None, /, *, repr: bool = True, eq: bool = True, **kwargs):
     """dataclasses.dataclass with the same arguments, but no compiled __repr__/__eq__/__hash__."""
     if kwargs.get("order") or kwargs.get("unsafe_hash"):
-        raise TypeError("hil.plans.dataclass_methods.dataclass: order and unsafe_hash are not supported")
+        raise TypeError("configfile.dataclass_methods.dataclass: order and unsafe_hash are not supported")
 
     def wrap(cls):
         own = [name for name in ("__repr__", "__eq__", "__hash__") if name in cls.__dict__]
