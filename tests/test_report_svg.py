@@ -113,3 +113,13 @@ def test_labels_are_escaped():
     ax.legend()
     fig.suptitle("a <b>")
     ET.fromstring(fig.svg("alt \"quoted\""))     # well-formed despite <, & and quotes
+
+
+@pytest.mark.parametrize("text", ["", "plain", "a & b < c > d \"e\" 'f'", "&amp; already", "<&>\"'" * 3,
+                                  "ünïcode ✓ — µs", "\x00\n\t"])
+def test_escape_is_html_escape(text):
+    import html
+
+    from hil.reports.svg import escape
+
+    assert escape(text) == html.escape(text)

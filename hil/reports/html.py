@@ -18,7 +18,6 @@
 from __future__ import annotations
 
 import base64
-import html
 import json
 import math
 import os
@@ -33,7 +32,7 @@ from hil.plans.limits import Limits
 from hil.plans.outcome import CheckResult, Outcome, PlanResult
 from hil.plans.signals import SignalSet
 from hil.plans.units import compatible, convert, is_angle
-from hil.reports.svg import Figure
+from hil.reports.svg import Figure, escape
 
 MAX_PLOT_POINTS = 4000
 _COLORS = {"PASS": "#1a7f37", "MARGINAL": "#9a6700", "FAIL": "#cf222e", "ERROR": "#8250df",
@@ -372,7 +371,7 @@ img{max-width:100%;border:1px solid #d0d7de;margin:.3em 0}
 
 
 def _badge(outcome: str) -> str:
-    return f'<span class="badge" style="background:{_COLORS.get(outcome, "#57606a")}">{html.escape(outcome)}</span>'
+    return f'<span class="badge" style="background:{_COLORS.get(outcome, "#57606a")}">{escape(outcome)}</span>'
 
 
 def _fmt(value: float | None) -> str:
@@ -386,12 +385,12 @@ def _fmt(value: float | None) -> str:
 def _img(b64: str | None, alt: str) -> str:
     if b64 is None:
         return '<p class="muted">(no plot: the data is not available)</p>'
-    return f'<img alt="{html.escape(alt)}" src="data:image/svg+xml;base64,{b64}">'
+    return f'<img alt="{escape(alt)}" src="data:image/svg+xml;base64,{b64}">'
 
 
 def html_report(result: PlanResult, signals: SignalSet, plots: Sequence = ()) -> str:
     """The self-contained HTML page of one plan's run."""
-    e = html.escape
+    e = escape
     end_s = signals.end_s if len(signals) else result.sim_duration_s
     counts = result.counts()
     parts = [f"<!DOCTYPE html><html lang=\"en\"><head><meta charset=\"utf-8\">"
@@ -497,7 +496,7 @@ def write_summary(entries: Sequence[tuple[PlanResult, Mapping[str, Path]]],
     """index.html (one row per plan, linking its report) and a combined junit.xml."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    e = html.escape
+    e = escape
     results = [r for r, _ in entries]
     rows = []
     profiles: list[str] = []
