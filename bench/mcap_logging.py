@@ -16,6 +16,8 @@ Timed, each on a fresh log over the same rows, variants interleaved `repeats` ti
   default, at the writer's `LZ4_LEVEL`), lz4 1 MiB, lz4 64 KiB at the lz4 library's own
   default level 0 (``lz4_level0_64KiB``), zstd 64 KiB and no compression. The in-memory lists the recorder
   keeps for the checks are part of the cost (they are there with or without a log).
+- ``numpy_packing_lz4_64KiB``: the default variant with the records packed by numpy column by
+  column (`FixedChannel.write_many` without the C codec's `records_into`), as before it.
 - ``per_message_path``: the same rows and the same in-memory lists, but one
   `FixedChannel.write` per message (the path before batching), lz4 64 KiB.
 - ``no_log``: the recorder without a log (its lists only); ``log_us_per_period`` of a
@@ -91,13 +93,26 @@ def _session_rows(periods: int) -> dict:
 
 def _recorder_run(path: str | None, rows: dict, compression: str = "lz4", chunk_size: int = 64 * 1024,
                   per_message: bool = False, finishes: list | None = None,
-                  lz4_level: int | None = None) -> float:
+                  lz4_level: int | None = None, numpy_packing: bool = False) -> float:
     """Feeds a run's rows through a Recorder as the session does; path None: no log (the
     recorder's in-memory lists only); per_message: the lists, plus one write() per message
     instead of the batched write_many."""
+    from hil.logs import mcap_writer
     from hil.logs.mcap_writer import McapLog
     from hil.logs.recorder import Recorder
 
+    packer = mcap_writer._RECORDS_INTO
+    if numpy_packing:
+        mcap_writer._RECORDS_INTO = None
+    try:
+        return _timed_feed(McapLog, Recorder, path, rows, compression, chunk_size, per_message,
+                           finishes, lz4_level)
+    finally:
+        mcap_writer._RECORDS_INTO = packer
+
+
+def _timed_feed(McapLog, Recorder, path, rows, compression, chunk_size, per_message, finishes,
+                lz4_level) -> float:
     rec = Recorder(rows["period_s"])
     log = None
     if path is not None:
@@ -257,6 +272,7 @@ def run(quick: bool = False) -> dict:
     }
     times: dict = {v: [] for v in VARIANTS}
     times["per_message"] = []
+    times["numpy_packing"] = []
     times["no_log"] = []
     times["sdk"] = []
     finishes: list[float] = []
@@ -271,6 +287,8 @@ def run(quick: bool = False) -> dict:
                     lz4_level))
             times["per_message"].append(_recorder_run(os.path.join(tmp, "per_message.mcap"), rows,
                                                       per_message=True))
+            times["numpy_packing"].append(_recorder_run(os.path.join(tmp, "numpy_packing.mcap"), rows,
+                                                        numpy_packing=True))
             times["no_log"].append(_recorder_run(None, rows))
             times["sdk"].append(_sdk_writer_run(os.path.join(tmp, "sdk.mcap"), rows))
         no_log = statistics.median(times["no_log"])
@@ -289,6 +307,9 @@ def run(quick: bool = False) -> dict:
                 "messages_per_chunk": round(summary["message_count"] / chunks),
             }
         result["recorder_path"] = recorder_path
+        result["numpy_packing_lz4_64KiB"] = {
+            "us_per_period": _stats([t / n * 1e6 for t in times["numpy_packing"]]),
+            "log_us_per_period": round((statistics.median(times["numpy_packing"]) - no_log) / n * 1e6, 2)}
         result["per_message_path_lz4_64KiB"] = {
             "us_per_period": _stats([t / n * 1e6 for t in times["per_message"]]),
             "log_us_per_period": round((statistics.median(times["per_message"]) - no_log) / n * 1e6, 2)}

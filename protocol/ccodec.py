@@ -33,7 +33,7 @@ from protocol.messages import MESSAGE_CLASSES
 
 BUILD_DIR = Path(__file__).resolve().parent / "c" / "build"
 _API = ("FrameEncoder", "StreamDecoder", "encode_frame", "crc16", "exchange_sample", "fields_into",
-        "exchange_periods")
+        "exchange_periods", "records_into", "stage_period", "stage_telemetry")
 
 
 def extension_path() -> Path:
@@ -78,6 +78,9 @@ else:
     fields_into = _ext.fields_into
     # a build older than the period loop has none: the bench's loop then runs every period
     exchange_periods = getattr(_ext, "exchange_periods", None)
+    records_into = getattr(_ext, "records_into", None)
+    stage_period = getattr(_ext, "stage_period", None)
+    stage_telemetry = getattr(_ext, "stage_telemetry", None)
 
 
 def __getattr__(name: str):

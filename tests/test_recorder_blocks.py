@@ -8,6 +8,7 @@ import tracemalloc
 from types import SimpleNamespace
 
 import numpy as np
+import pytest
 
 from hil.logs.mcap_writer import McapLog
 from hil.logs.reader import read_log
@@ -107,3 +108,36 @@ def test_a_long_run_keeps_blocks_not_objects():
     sealed = 8 * (1 + len(TRUTH_FIELDS) + 1 + len(SENSOR_FIELDS) + 1 + len(TELEMETRY_FIELDS))
     open_batch = LOG_BATCH_PERIODS * 1500
     assert grown < n * sealed * 1.2 + open_batch, (grown / n, sealed)
+
+
+def test_the_c_row_writers_and_the_numpy_path_keep_the_same_rows(monkeypatch):
+    """Recorder.period/telemetry through protocol.ccodec.stage_period/stage_telemetry and through
+    numpy: the same rows, for a SensorSample (a tuple), an object with the attributes, truth
+    values that are numpy scalars, and Fractions (not int or float: the C writer refuses them
+    and the recorder hands the row to numpy)."""
+    from fractions import Fraction
+    from hil.logs import recorder as recorder_module
+    from plant_rt.sensors import SensorSample
+
+    def feed(rec):
+        for k in range(3 * LOG_BATCH_PERIODS + 5):
+            truth = _truth(k) if k % 3 else tuple(np.float64(v) for v in _truth(k))
+            if k % 5 == 1:
+                truth = tuple(Fraction(v) for v in _truth(k))
+            s = _sample(k)
+            sample = s if k % 2 else SensorSample(k, s.adc_i1, s.adc_i2, s.adc_vdc, s.encoder, s.status)
+            rec.period(k, truth, sample)
+            rec.telemetry(_telemetry(k))
+        return rec.truth_rows, rec.sensor_rows, rec.telemetry_rows, rec.periods
+
+    with_c = feed(Recorder(T))
+    for name in ("_STAGE_PERIOD", "_STAGE_TELEMETRY"):
+        monkeypatch.setattr(recorder_module, name, None)
+    without = feed(Recorder(T))
+    want = _want(range(3 * LOG_BATCH_PERIODS + 5))
+    for a, b, w in zip(with_c, without, want):
+        assert np.array_equal(a, b) and np.array_equal(a, w)
+    assert np.array_equal(with_c[3], without[3])
+    monkeypatch.undo()
+    with pytest.raises(ValueError, match="rows of 3 values"):
+        Recorder(T).period(0, (1.0, 2.0, 3.0), _sample(0))

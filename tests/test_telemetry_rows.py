@@ -1,6 +1,6 @@
-"""TELEMETRY rows made by the C codec a batch at a time (protocol.ccodec.fields_into), as the
-recorder keeps and logs them: values in the SPEC's field order, errors, and the same rows with
-and without the C codec."""
+"""TELEMETRY rows made by the C codec (protocol.ccodec.fields_into; the recorder's
+stage_telemetry writes the same fields in the same order), as the recorder keeps and logs them:
+values in the SPEC's field order, errors, and the same rows with and without the C codec."""
 from __future__ import annotations
 
 import numpy as np
@@ -66,10 +66,11 @@ def test_recorder_telemetry_rows_are_the_same_with_and_without_the_c_codec(monke
 
     msgs = [_telemetry(k) for k in range(700)]            # more than two log batches
     want = np.array([[getattr(m, f) for f in ("period",) + TELEMETRY_FIELDS] for m in msgs])
-    for fields_into in (recorder_module._FIELDS_INTO, None):
-        monkeypatch.setattr(recorder_module, "_FIELDS_INTO", fields_into)
+    for c_codec in (True, False):
+        for name in ("_STAGE_PERIOD", "_STAGE_TELEMETRY"):
+            monkeypatch.setattr(recorder_module, name, getattr(recorder_module, name) if c_codec else None)
         rec = Recorder(50e-6)
-        log = McapLog(tmp_path / f"{fields_into is None}.mcap")
+        log = McapLog(tmp_path / f"{c_codec}.mcap")
         rec.attach_log(log)
         for k, m in enumerate(msgs):
             rec.period(k, (k * 50e-6,) + (0.0,) * 18, _Sample())
@@ -77,7 +78,8 @@ def test_recorder_telemetry_rows_are_the_same_with_and_without_the_c_codec(monke
         assert np.array_equal(rec.telemetry_rows, want)
         assert rec.latest("telemetry", 1) == 3.0 and rec.latest("telemetry", 0) == 699.0
         log.close()
-        logged = read_log(tmp_path / f"{fields_into is None}.mcap")["/ctrl/telemetry"]
+        monkeypatch.undo()
+        logged = read_log(tmp_path / f"{c_codec}.mcap")["/ctrl/telemetry"]
         sector, speed = logged["sector"], logged["speed_feedback_rad_s"]
         assert len(sector) == 700 and np.all(sector == 3)
         assert np.array_equal(speed, want[:, 5].astype(np.float32))

@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 
 from hil.logs import mcap_records as rec
+from protocol import ccodec
 
 LIBRARY = "hil-bench mcap_log"
 DEFAULT_CHUNK_SIZE = 64 * 1024
@@ -55,6 +56,9 @@ FIXED_TYPES: dict[str, tuple[int, int, str]] = {
 }
 _TYPE_BYTES = 12                # FieldDescriptorProto.TYPE_BYTES
 _LABEL_OPTIONAL = 1             # FieldDescriptorProto.LABEL_OPTIONAL
+
+#: The C codec extension's record packer (FixedChannel.write_many), None without it.
+_RECORDS_INTO = ccodec.records_into if ccodec.AVAILABLE else None
 
 # Message record prefix: opcode, record length, channel id, sequence, log time, publish time.
 _MESSAGE_PREFIX = "<BQHIQQ"
@@ -222,7 +226,7 @@ class FixedChannel:
 
     __slots__ = ("topic", "message_name", "field_names", "channel_id", "record_size", "_log", "_args",
                  "_pack_into", "_chunk", "_index", "_dtype", "_template", "_value_names", "_int_cols",
-                 "_int_lo", "_int_hi")
+                 "_int_lo", "_int_hi", "_field_types", "_layout")
 
     def __init__(self, log: McapLog, channel_id: int, topic: str, message_name: str,
                  fields: list[tuple[str, str]]):
@@ -231,6 +235,8 @@ class FixedChannel:
         self.message_name = message_name
         self.channel_id = channel_id
         self.field_names = tuple(name for name, _ in fields)
+        self._field_types = tuple(type_name for _, type_name in fields)
+        self._layout = None        # (template bytes, struct codes, value offsets): _packed
         fmt = _MESSAGE_PREFIX
         payload = 0
         tail: list[int | float] = []
@@ -294,18 +300,20 @@ class FixedChannel:
         if values.ndim != 2 or values.shape != (n, len(self.field_names)):
             raise ValueError(f"{self.topic}: expected {n} rows of {len(self.field_names)} values "
                              f"({', '.join(self.field_names)}), got shape {values.shape}")
-        records = np.repeat(self._template, n)
-        records["log_time"] = times
-        records["publish_time"] = times
-        with np.errstate(invalid="raise", over="raise"):
-            try:
-                if self._int_cols and values.dtype.kind == "f":
-                    self._check_whole(values[:, self._int_cols])
-                for i, name in enumerate(self._value_names):
-                    records[name] = values[:, i]
-            except (ValueError, FloatingPointError, TypeError) as exc:
-                raise ValueError(f"{self.topic}: a value does not fit its field type ({exc})") from None
-        raw = records.view(np.uint8).reshape(-1)
+        raw = self._packed(times, values) if _RECORDS_INTO is not None else None
+        if raw is None:
+            records = np.repeat(self._template, n)
+            records["log_time"] = times
+            records["publish_time"] = times
+            with np.errstate(invalid="raise", over="raise"):
+                try:
+                    if self._int_cols and values.dtype.kind == "f":
+                        self._check_whole(values[:, self._int_cols])
+                    for i, name in enumerate(self._value_names):
+                        records[name] = values[:, i]
+                except (ValueError, FloatingPointError, TypeError) as exc:
+                    raise ValueError(f"{self.topic}: a value does not fit its field type ({exc})") from None
+            raw = records.view(np.uint8).reshape(-1)
         size = self.record_size
         done = 0
         log = self._log
@@ -327,6 +335,26 @@ class FixedChannel:
             done += take
             if end >= chunk.limit:
                 log._finish_chunk()
+
+    def _packed(self, times: np.ndarray, values: np.ndarray) -> np.ndarray | None:
+        """The records as bytes, built in one C call (protocol.ccodec.records_into: 1.5 us a
+        period less than numpy's column by column, bench mcap_logging); None for values that
+        are not float64 or that do not all fit their fields (the numpy path then decides, and
+        names the value and the field)."""
+        if values.dtype != np.float64:
+            return None
+        raw = np.empty(len(times) * self.record_size, dtype=np.uint8)
+        layout = self._layout
+        if layout is None:
+            template = self._template.tobytes()
+            codes = "".join(FIXED_TYPES[t][2] for t in self._field_types).encode()
+            offsets = tuple(self._dtype.fields[name][1] for name in self._value_names)
+            layout = self._layout = (template, codes, offsets)
+        try:
+            _RECORDS_INTO(raw, 0, *layout, times, np.ascontiguousarray(values))
+        except ValueError:
+            return None
+        return raw
 
     def _check_whole(self, block: np.ndarray) -> None:
         """The integer fields' values (as floats): whole, finite and in their types' ranges."""

@@ -1,7 +1,8 @@
 """Keeps every period's plant truth, sensor values, telemetry and commands.
 
-A period's rows go straight into a preallocated float64 stage: one C call a row from Python
-(protocol.ccodec.fields_into), or written by the C period loop itself (no Python object kept).
+A period's rows go straight into a preallocated float64 stage: one C call from Python
+(protocol.ccodec.stage_period, stage_telemetry), or written by the C period loop itself (no
+Python object kept).
 Every `LOG_BATCH_PERIODS` periods the stage is sealed: copied into blocks the run keeps for its
 checks at its end, and emptied in place. With a log, the new blocks go to it at
 the same time (`FixedChannel.write_many`, numpy columns into the open chunk) instead of one
@@ -38,8 +39,9 @@ COMMAND_FIELDS = ("enable", "speed_source", "speed_ref_rpm", "torque_mode", "tor
 STEP_SIGNALS = ("ctrl.fault_code", "fault.active_bits")
 
 
-#: The C codec's conversion of tuples or decoded messages into float64 rows, or None.
-_FIELDS_INTO = ccodec.fields_into if ccodec.AVAILABLE else None
+#: The C codec's row writers (one call a period's rows, one a TELEMETRY), or None.
+_STAGE_PERIOD = ccodec.stage_period if ccodec.AVAILABLE else None
+_STAGE_TELEMETRY = ccodec.stage_telemetry if ccodec.AVAILABLE else None
 
 
 #: A TELEMETRY as its row: the period, then TELEMETRY_FIELDS.
@@ -49,19 +51,6 @@ telemetry_row = attrgetter("period", *TELEMETRY_FIELDS)
 #: most one a period; twice the batch is room for one that sends more now and then).
 TELEMETRY_STAGE_ROWS = 2 * LOG_BATCH_PERIODS
 _TRUTH_WIDTH = len(TRUTH_FIELDS)
-_TELEMETRY_ROW_BYTES = 8 * (1 + len(TELEMETRY_FIELDS))
-
-
-def _put_row(stage: np.ndarray, n: int, values: tuple) -> None:
-    """values (ints and floats) as row n of a float64 stage: by the C codec in one call, or by
-    numpy (a value that is not a plain number: a bench replay's numpy scalars)."""
-    if _FIELDS_INTO is not None:
-        try:
-            _FIELDS_INTO([values], stage, n * stage.shape[1] * 8)
-            return
-        except TypeError:
-            pass
-    stage[n] = values
 
 
 def _log_times(periods, period_s: float) -> np.ndarray:
@@ -97,8 +86,8 @@ class Recorder:
     """Per-period rows, optionally mirrored to an McapLog.
 
     A period's rows go straight into this batch's float64 stage (truth, sensors with the
-    period first, telemetry with the period first), preallocated once: one C call each from
-    Python (protocol.ccodec.fields_into), or written by the C period loop itself
+    period first, telemetry with the period first), preallocated once: one C call from
+    Python (protocol.ccodec.stage_period, stage_telemetry), or written by the C period loop itself
     (protocol.ccodec.exchange_periods, through `batch_stage`). Every LOG_BATCH_PERIODS periods
     the stage is sealed: copied into blocks the run keeps for its checks and, with a log, sent
     to it in one batch per channel. The run keeps blocks, not objects: 336 bytes a period
@@ -115,6 +104,7 @@ class Recorder:
         self._truth_stage = np.empty((LOG_BATCH_PERIODS, len(TRUTH_FIELDS)))
         self._telemetry_stage = np.empty((TELEMETRY_STAGE_ROWS, 1 + len(TELEMETRY_FIELDS)))
         self._fill = np.zeros(2, dtype=np.int64)         # periods, telemetry rows
+        self._stage = (self._sensor_stage, self._truth_stage, self._telemetry_stage, self._fill)
         # sealed batches: periods (int64), truth, sensors (period + SENSOR_FIELDS) and
         # telemetry (period + TELEMETRY_FIELDS) rows, float64
         self._period_blocks: list[np.ndarray] = []
@@ -149,31 +139,41 @@ class Recorder:
         log.before_flush(self.seal)
 
     def period(self, k: int, truth: tuple, sample) -> None:
-        fill = self._fill
-        n = int(fill[0])
-        if len(truth) != _TRUTH_WIDTH:
-            raise ValueError(f"recorder: rows of {len(truth)} values where the log's channel has "
-                             f"{_TRUTH_WIDTH}")
-        _put_row(self._truth_stage, n, truth)
-        _put_row(self._sensor_stage, n, (k, sample.adc_i1, sample.adc_i2, sample.adc_vdc,
-                                         sample.encoder, sample.status))
-        fill[0] = n + 1
-        if n + 1 >= LOG_BATCH_PERIODS:
-            self.seal()
+        if _STAGE_PERIOD is None or type(truth) is not tuple:
+            self._period_numpy(k, truth, sample)
+        else:
+            try:
+                _STAGE_PERIOD(self._stage, self.seal, k, truth, sample)
+            except TypeError:               # a value that is not a plain number
+                self._period_numpy(k, truth, sample)
         live = self.live
         if live is not None and k % live.every == 0:
             live.period(k, truth, sample)
 
-    def telemetry(self, msg) -> None:
+    def _period_numpy(self, k: int, truth, sample) -> None:
+        """period()'s rows without the C codec (or for values it does not take)."""
+        if len(truth) != _TRUTH_WIDTH:
+            raise ValueError(f"recorder: rows of {len(truth)} values where the log's channel has "
+                             f"{_TRUTH_WIDTH}")
         fill = self._fill
-        n = int(fill[1])
-        if _FIELDS_INTO is None or type(msg) is not Telemetry:
-            self._telemetry_stage[n] = telemetry_row(msg)
-        else:
-            _FIELDS_INTO([msg], self._telemetry_stage, n * _TELEMETRY_ROW_BYTES)
-        fill[1] = n + 1
-        if n + 1 >= TELEMETRY_STAGE_ROWS:
+        n = int(fill[0])
+        self._truth_stage[n] = truth
+        self._sensor_stage[n] = (k, sample.adc_i1, sample.adc_i2, sample.adc_vdc, sample.encoder,
+                                 sample.status)
+        fill[0] = n + 1
+        if n + 1 >= LOG_BATCH_PERIODS:
             self.seal()
+
+    def telemetry(self, msg) -> None:
+        if _STAGE_TELEMETRY is not None and type(msg) is Telemetry:
+            _STAGE_TELEMETRY(self._stage, self.seal, msg)
+        else:
+            fill = self._fill
+            n = int(fill[1])
+            self._telemetry_stage[n] = telemetry_row(msg)
+            fill[1] = n + 1
+            if n + 1 >= TELEMETRY_STAGE_ROWS:
+                self.seal()
         live = self.live
         if live is not None and msg.period % live.every == 0:
             live.telemetry_row(telemetry_row(msg))
@@ -191,7 +191,7 @@ class Recorder:
         to 0), never replacing its arrays."""
         if self.live is not None:
             return None
-        return self._sensor_stage, self._truth_stage, self._telemetry_stage, self._fill
+        return self._stage
 
     def seal(self) -> None:
         """This batch's rows become float64 blocks and, with a log, go to it (every

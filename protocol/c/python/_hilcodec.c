@@ -23,6 +23,7 @@
 #include <structmember.h>
 
 #include <errno.h>
+#include <float.h>
 #include <math.h>
 #include <poll.h>
 #include <string.h>
@@ -1332,35 +1333,45 @@ static int stage_seal_if_full(stage_t *st)
 
 static int value_of(PyObject *v, double *d, Py_ssize_t r, const msg_class *mc, const char *field, Py_ssize_t i);
 
-/* The period's record, what Recorder.period writes: k and the sample's five fields, truth(). */
-static int record_period(stage_t *st, PyObject *s, PyObject *truth)
+/* A period's rows, what Recorder.period writes: k and the sample's five fields (sensors), the truth
+ * tuple; then seal() if the stage is full. A value that is not an int or a float: TypeError, and
+ * the row is not counted. */
+static int stage_row(stage_t *st, PyObject *k, PyObject *const *five, PyObject *truth_row)
 {
     int64_t n = st->fill[0];
+    if (!PyTuple_Check(truth_row) || PyTuple_GET_SIZE(truth_row) != st->truth_width) {
+        PyErr_Format(PyExc_TypeError, "recorder: a truth row is a tuple of %zd values", st->truth_width);
+        return -1;
+    }
     double *row = st->sensors + (size_t)n * SENSOR_ROW;
-    for (Py_ssize_t i = 0; i < SENSOR_ROW; i++) {
-        if (value_of(PyTuple_GET_ITEM(s, i), &row[i], n, NULL, NULL, i) < 0) {
+    if (value_of(k, &row[0], n, NULL, NULL, 0) < 0) {
+        return -1;
+    }
+    for (Py_ssize_t i = 0; i < SENSOR_ROW - 1; i++) {
+        if (value_of(five[i], &row[i + 1], n, NULL, NULL, i + 1) < 0) {
             return -1;
         }
     }
+    row = st->truth + (size_t)n * (size_t)st->truth_width;
+    for (Py_ssize_t i = 0; i < st->truth_width; i++) {
+        if (value_of(PyTuple_GET_ITEM(truth_row, i), &row[i], n, NULL, NULL, i) < 0) {
+            return -1;
+        }
+    }
+    st->fill[0] = n + 1;
+    return stage_seal_if_full(st);
+}
+
+/* The loop's record of period k: the 6-tuple sample s and truth(). */
+static int record_period(stage_t *st, PyObject *s, PyObject *truth)
+{
     PyObject *t = PyObject_CallNoArgs(truth);
     if (t == NULL) {
         return -1;
     }
-    if (!PyTuple_Check(t) || PyTuple_GET_SIZE(t) != st->truth_width) {
-        Py_DECREF(t);
-        PyErr_Format(PyExc_ValueError, "recorder: truth() gave a row that is not %zd values", st->truth_width);
-        return -1;
-    }
-    row = st->truth + (size_t)n * (size_t)st->truth_width;
-    for (Py_ssize_t i = 0; i < st->truth_width; i++) {
-        if (value_of(PyTuple_GET_ITEM(t, i), &row[i], n, NULL, NULL, i) < 0) {
-            Py_DECREF(t);
-            return -1;
-        }
-    }
+    int rc = stage_row(st, PyTuple_GET_ITEM(s, 0), &PyTuple_GET_ITEM(s, 1), t);
     Py_DECREF(t);
-    st->fill[0] = n + 1;
-    return stage_seal_if_full(st);
+    return rc;
 }
 
 /* A TELEMETRY, decoded (m) or as the message object it was queued as (obj), as Recorder.telemetry
@@ -1871,6 +1882,237 @@ static PyObject *mod_fields_into(PyObject *self, PyObject *const *args, Py_ssize
     return PyLong_FromSsize_t(rows);
 }
 
+PyDoc_STRVAR(stage_period_doc,
+"stage_period(stage, seal, k, truth, sample) -> None\n\n"
+"Recorder.period in one call: k and the sample's adc_i1, adc_i2, adc_vdc, encoder and status (the\n"
+"items after the first of a 6-tuple such as plant_rt's SensorSample, or those attributes) as\n"
+"the next sensors row of `stage` (Recorder.batch_stage), the `truth` tuple as the next truth\n"
+"row; then seal() if the stage is full. TypeError (nothing counted) for a value that is not an\n"
+"int or a float, or a truth that is not a tuple of the stage's width.");
+
+static const char *const sensor_attrs[5] = {"adc_i1", "adc_i2", "adc_vdc", "encoder", "status"};
+
+static PyObject *mod_stage_period(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    (void)self;
+    if (nargs != 5) {
+        PyErr_SetString(PyExc_TypeError, "stage_period takes 5 arguments");
+        return NULL;
+    }
+    stage_t st;
+    if (stage_take(&st, args[0], args[1]) < 0) {
+        return NULL;
+    }
+    PyObject *sample = args[4];
+    int rc;
+    if (PyTuple_Check(sample) && PyTuple_GET_SIZE(sample) == 6) {
+        rc = stage_row(&st, args[2], &PyTuple_GET_ITEM(sample, 1), args[3]);
+    } else {
+        PyObject *five[5] = {NULL, NULL, NULL, NULL, NULL};
+        rc = 0;
+        for (int i = 0; i < 5 && rc == 0; i++) {
+            five[i] = PyObject_GetAttrString(sample, sensor_attrs[i]);
+            rc = five[i] == NULL ? -1 : 0;
+        }
+        if (rc == 0) {
+            rc = stage_row(&st, args[2], five, args[3]);
+        }
+        for (int i = 0; i < 5; i++) {
+            Py_XDECREF(five[i]);
+        }
+    }
+    stage_release(&st);
+    if (rc < 0) {
+        return NULL;
+    }
+    Py_RETURN_NONE;
+}
+
+PyDoc_STRVAR(stage_telemetry_doc,
+"stage_telemetry(stage, seal, msg) -> None\n\n"
+"Recorder.telemetry in one call: the TELEMETRY message msg (protocol.messages.Telemetry) as the\n"
+"next telemetry row of `stage` (its period, then its fields), then seal() if the stage is full.\n"
+"TypeError for another kind of object or a field that is not a number.");
+
+static PyObject *mod_stage_telemetry(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    (void)self;
+    if (nargs != 3) {
+        PyErr_SetString(PyExc_TypeError, "stage_telemetry takes 3 arguments");
+        return NULL;
+    }
+    if (!ready()) {
+        return NULL;
+    }
+    if (!Py_IS_TYPE(args[2], classes[HIL_MSG_TELEMETRY].cls)) {
+        PyErr_SetString(PyExc_TypeError, "stage_telemetry: not a Telemetry message");
+        return NULL;
+    }
+    stage_t st;
+    if (stage_take(&st, args[0], args[1]) < 0) {
+        return NULL;
+    }
+    int rc = record_telemetry(&st, NULL, args[2]);
+    stage_release(&st);
+    if (rc < 0) {
+        return NULL;
+    }
+    Py_RETURN_NONE;
+}
+
+PyDoc_STRVAR(records_into_doc,
+"records_into(out, offset, template, codes, offsets, times, values) -> count\n\n"
+"The recorder's float64 rows as fixed-layout log records (hil/logs/mcap_writer.py\n"
+"FixedChannel.write_many): for each of the n rows, `template` (one record's bytes, with its\n"
+"constant header and field tags) is copied into the writable buffer `out` from byte `offset`\n"
+"on, the row's time (the uint64 buffer `times`) written as its log and publish time (bytes 15\n"
+"and 23, little-endian), and value i of the row (the float64 buffer `values`, n rows of\n"
+"len(codes)) written at offsets[i] as codes[i]: 'd' double, 'f' float, 'I' uint32, 'i' int32,\n"
+"'Q' uint64, 'q' int64, little-endian. The values are all checked before anything is written:\n"
+"an integer field takes a whole number in its range, a float field a value a float holds (NaN\n"
+"and infinities included); otherwise ValueError (the caller's numpy path names the value and\n"
+"the field), and `out` is untouched.");
+
+static void put_le(uint8_t *p, uint64_t v, int bytes)
+{
+    for (int i = 0; i < bytes; i++) {
+        p[i] = (uint8_t)(v >> (8 * i));
+    }
+}
+
+static int fits(double v, char code)
+{
+    switch (code) {
+    case 'd':
+        return 1;
+    case 'f':
+        return !isfinite(v) || fabs(v) <= (double)FLT_MAX;
+    case 'I':
+        return v == floor(v) && v >= 0.0 && v <= 4294967295.0;
+    case 'i':
+        return v == floor(v) && v >= -2147483648.0 && v <= 2147483647.0;
+    case 'Q':
+        return v == floor(v) && v >= 0.0 && v < 18446744073709551616.0;
+    case 'q':
+        return v == floor(v) && v >= -9223372036854775808.0 && v < 9223372036854775808.0;
+    default:
+        return 0;
+    }
+}
+
+static PyObject *mod_records_into(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    (void)self;
+    if (nargs != 7) {
+        PyErr_SetString(PyExc_TypeError, "records_into takes 7 arguments");
+        return NULL;
+    }
+    Py_ssize_t offset = PyLong_AsSsize_t(args[1]);
+    if (offset == -1 && PyErr_Occurred()) {
+        return NULL;
+    }
+    PyObject *template = args[2], *codes = args[3], *offsets = args[4];
+    if (!PyBytes_CheckExact(template) || !PyBytes_CheckExact(codes) || !PyTuple_CheckExact(offsets) ||
+        PyTuple_GET_SIZE(offsets) != PyBytes_GET_SIZE(codes) || PyBytes_GET_SIZE(template) < 31) {
+        PyErr_SetString(PyExc_TypeError, "records_into: template and codes are bytes, offsets a tuple of one "
+                                         "int per code, the template at least a message record's 31-byte head");
+        return NULL;
+    }
+    Py_ssize_t size = PyBytes_GET_SIZE(template), width = PyBytes_GET_SIZE(codes);
+    const char *code = PyBytes_AS_STRING(codes);
+    Py_ssize_t off[64];
+    int nbytes[64];
+    if (width > 64) {
+        PyErr_SetString(PyExc_ValueError, "records_into: at most 64 fields");
+        return NULL;
+    }
+    for (Py_ssize_t i = 0; i < width; i++) {
+        off[i] = PyLong_AsSsize_t(PyTuple_GET_ITEM(offsets, i));
+        nbytes[i] = code[i] == 'd' || code[i] == 'Q' || code[i] == 'q' ? 8 : 4;
+        if (off[i] == -1 && PyErr_Occurred()) {
+            return NULL;
+        }
+        if (strchr("dfIiQq", code[i]) == NULL || code[i] == '\0' || off[i] < 31 || off[i] + nbytes[i] > size) {
+            PyErr_Format(PyExc_ValueError, "records_into: field %zd: code %c at offset %zd does not fit a "
+                         "%zd-byte record", i, code[i], off[i], size);
+            return NULL;
+        }
+    }
+    Py_buffer out, times, values;
+    if (PyObject_GetBuffer(args[0], &out, PyBUF_WRITABLE | PyBUF_C_CONTIGUOUS) < 0) {
+        return NULL;
+    }
+    if (PyObject_GetBuffer(args[5], &times, PyBUF_C_CONTIGUOUS) < 0) {
+        PyBuffer_Release(&out);
+        return NULL;
+    }
+    if (PyObject_GetBuffer(args[6], &values, PyBUF_C_CONTIGUOUS) < 0) {
+        PyBuffer_Release(&out);
+        PyBuffer_Release(&times);
+        return NULL;
+    }
+    Py_ssize_t n = times.len / (Py_ssize_t)sizeof(uint64_t);
+    PyObject *result = NULL;
+    if (times.len != n * (Py_ssize_t)sizeof(uint64_t) || values.len != n * width * (Py_ssize_t)sizeof(double) ||
+        offset < 0 || offset > out.len || (out.len - offset) / size < n) {
+        PyErr_Format(PyExc_ValueError, "records_into: %zd times, %zd bytes of values for %zd fields and %zd bytes "
+                     "from offset %zd do not go together", n, values.len, width, out.len, offset);
+        goto done;
+    }
+    const double *v = (const double *)values.buf;
+    for (Py_ssize_t r = 0; r < n; r++) {
+        for (Py_ssize_t i = 0; i < width; i++) {
+            if (!fits(v[r * width + i], code[i])) {
+                PyErr_Format(PyExc_ValueError, "records_into: row %zd, field %zd does not fit its type", r, i);
+                goto done;
+            }
+        }
+    }
+    const uint64_t *t = (const uint64_t *)times.buf;
+    const uint8_t *tpl = (const uint8_t *)PyBytes_AS_STRING(template);
+    uint8_t *p = (uint8_t *)out.buf + offset;
+    for (Py_ssize_t r = 0; r < n; r++, p += size) {
+        memcpy(p, tpl, (size_t)size);
+        put_le(p + 15, t[r], 8);
+        put_le(p + 23, t[r], 8);
+        for (Py_ssize_t i = 0; i < width; i++) {
+            double d = v[r * width + i];
+            uint64_t bits;
+            switch (code[i]) {
+            case 'd':
+                memcpy(&bits, &d, sizeof bits);
+                break;
+            case 'f': {
+                float f = (float)d;
+                uint32_t b32;
+                memcpy(&b32, &f, sizeof b32);
+                bits = b32;
+                break;
+            }
+            case 'I':
+                bits = (uint64_t)d;
+                break;
+            case 'i':
+                bits = (uint64_t)(uint32_t)(int32_t)d;
+                break;
+            case 'Q':
+                bits = (uint64_t)d;
+                break;
+            default: /* 'q' */
+                bits = (uint64_t)(int64_t)d;
+                break;
+            }
+            put_le(p + off[i], bits, nbytes[i]);
+        }
+    }
+    result = PyLong_FromSsize_t(n);
+done:
+    PyBuffer_Release(&out);
+    PyBuffer_Release(&times);
+    PyBuffer_Release(&values);
+    return result;
+}
+
 /* ------------------------------------------------------------------ module */
 
 static PyMethodDef module_methods[] = {
@@ -1880,6 +2122,9 @@ static PyMethodDef module_methods[] = {
     {"exchange_sample", (PyCFunction)(void (*)(void))mod_exchange_sample, METH_FASTCALL, exchange_sample_doc},
     {"fields_into", (PyCFunction)(void (*)(void))mod_fields_into, METH_FASTCALL, fields_into_doc},
     {"exchange_periods", (PyCFunction)(void (*)(void))mod_exchange_periods, METH_FASTCALL, exchange_periods_doc},
+    {"records_into", (PyCFunction)(void (*)(void))mod_records_into, METH_FASTCALL, records_into_doc},
+    {"stage_period", (PyCFunction)(void (*)(void))mod_stage_period, METH_FASTCALL, stage_period_doc},
+    {"stage_telemetry", (PyCFunction)(void (*)(void))mod_stage_telemetry, METH_FASTCALL, stage_telemetry_doc},
     {NULL, NULL, 0, NULL},
 };
 
