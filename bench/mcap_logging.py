@@ -18,6 +18,9 @@ Timed, each on a fresh log over the same rows, variants interleaved `repeats` ti
   keeps for the checks are part of the cost (they are there with or without a log).
 - ``numpy_packing_lz4_64KiB``: the default variant with the records packed by numpy column by
   column (`FixedChannel.write_many` without the C codec's `records_into`), as before it.
+- ``records_into_in_session``: two logged in-process sessions, one packing with the C codec
+  and one with numpy, batches alternating (the variant above goes through Recorder's Python
+  path and drifts with the VM; this one is the period loop as a run has it).
 - ``per_message_path``: the same rows and the same in-memory lists, but one
   `FixedChannel.write` per message (the path before batching), lz4 64 KiB.
 - ``no_log``: the recorder without a log (its lists only); ``log_us_per_period`` of a
@@ -338,7 +341,46 @@ def run(quick: bool = False) -> dict:
     m = min(n, 20_000)
     runs = [_one_message(m, rows["truth"]) for _ in range(repeats)]
     result["one_truth_message_us"] = {k: _stats([r[k] for r in runs]) for k in runs[0]}
+    result["records_into_in_session"] = _packing_in_session(5 if quick else 15, 5000)
     return result
+
+
+def _packing_in_session(batches: int, periods: int) -> dict:
+    """Two logged in-process sessions side by side, one packing the log's records with the C
+    codec's records_into and one with numpy, batches alternating: us a period of each (median)
+    and the median of numpy over C batch by batch."""
+    import contextlib
+
+    from hil.logs import mcap_writer
+    from hil.session.bench_session import BenchSession, SessionConfig
+    from plant_rt import load_profile
+
+    packer = mcap_writer._RECORDS_INTO
+    if packer is None:
+        return {"error": "the C codec extension is not built"}
+    us: dict[str, list[float]] = {"c": [], "numpy": []}
+    with tempfile.TemporaryDirectory() as tmp, contextlib.ExitStack() as stack:
+        sessions = {}
+        try:
+            for kind in us:
+                mcap_writer._RECORDS_INTO = packer if kind == "c" else None
+                s = stack.enter_context(BenchSession(load_profile(), SessionConfig(
+                    link="stub", log_path=os.path.join(tmp, f"{kind}.mcap"))))
+                s.send_command(enable=True, speed_source="ekf", speed_ref_rpm=3000)
+                s.run_periods(periods)                      # to speed, warmed up
+                sessions[kind] = s
+            for _ in range(batches):
+                for kind, s in sessions.items():
+                    mcap_writer._RECORDS_INTO = packer if kind == "c" else None
+                    t0 = time.perf_counter()
+                    s.run_periods(periods)
+                    us[kind].append((time.perf_counter() - t0) / periods * 1e6)
+        finally:
+            mcap_writer._RECORDS_INTO = packer
+    return {"c_us_per_period": round(statistics.median(us["c"]), 2),
+            "numpy_us_per_period": round(statistics.median(us["numpy"]), 2),
+            "numpy_over_c": round(statistics.median(n / c for n, c in zip(us["numpy"], us["c"])), 3),
+            "batches": batches, "periods_per_batch": periods}
 
 
 if __name__ == "__main__":

@@ -19,7 +19,10 @@ then split into the C functions that do its work, by their inclusive counts:
 Since the C period loop (protocol.ccodec.exchange_periods) the last is mostly the plant's
 Python (sample, truth, step) and the MCAP writer's.
 ``stub+log, lz4 level 0`` is the logged period with the chunks compressed at the lz4
-library's default level instead of the writer's (hil.logs.mcap_writer.LZ4_LEVEL).
+library's default level instead of the writer's (hil.logs.mcap_writer.LZ4_LEVEL);
+``stub+log, records packed by numpy`` without the C codec's records_into (the log's records
+built column by column), and ``stub+log, the Python period loop`` with every period in
+BenchSession's Python loop instead of the C one: what each of the two C pieces saves.
 """
 from __future__ import annotations
 
@@ -98,6 +101,8 @@ def run(quick: bool = False) -> dict:
     out = {"periods": periods, "stub": per_period("stub", periods),
            "stub+log": per_period("stub+log", periods, split=True),
            "stub+log, lz4 level 0": per_period("stub+log@lz4_level0", periods, split=True),
+           "stub+log, records packed by numpy": per_period("stub+log@numpy_packing", periods),
+           "stub+log, the Python period loop": per_period("stub+log@python_loop", periods),
            "plant_only": per_period("plant", periods)}
     out["stub+log_vs_plant_only"] = round(out["stub+log"]["instructions_per_period"]
                                           / out["plant_only"]["instructions_per_period"], 2)
