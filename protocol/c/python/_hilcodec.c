@@ -862,6 +862,32 @@ static PyObject *exchange_period(void *fn_addr, void *fw, EncoderObject *enc, De
                                  PyObject *capture_out, PyObject *capture_in, PyObject *inbox,
                                  PyObject *const *fields, int64_t counts[5]);
 
+/* The codec arguments of exchange_sample and exchange_periods, a[0..4]: the bench's C encoder and
+ * decoder, the two captures (bytearrays or None) and the counts (a writable buffer of 5 int64,
+ * taken into *counts: release it). 0, or -1 with TypeError/ValueError naming `who`. */
+static int codec_args(const char *who, PyObject *const *a, Py_buffer *counts)
+{
+    if (!PyObject_TypeCheck(a[0], &EncoderType) || !PyObject_TypeCheck(a[1], &DecoderType)) {
+        PyErr_Format(PyExc_TypeError, "%s: needs a protocol.ccodec FrameEncoder and StreamDecoder", who);
+        return -1;
+    }
+    for (int i = 2; i < 4; i++) {
+        if (a[i] != Py_None && !PyByteArray_CheckExact(a[i])) {
+            PyErr_Format(PyExc_TypeError, "%s: captures are bytearrays or None", who);
+            return -1;
+        }
+    }
+    if (PyObject_GetBuffer(a[4], counts, PyBUF_WRITABLE | PyBUF_C_CONTIGUOUS) < 0) {
+        return -1;
+    }
+    if (counts->len < (Py_ssize_t)(5 * sizeof(int64_t))) {
+        PyBuffer_Release(counts);
+        PyErr_Format(PyExc_ValueError, "%s: counts must hold 5 int64", who);
+        return -1;
+    }
+    return 0;
+}
+
 static PyObject *mod_exchange_sample(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     (void)self;
@@ -881,28 +907,13 @@ static PyObject *mod_exchange_sample(PyObject *self, PyObject *const *args, Py_s
         PyErr_SetString(PyExc_ValueError, "exchange_sample: null exchange function or instance");
         return NULL;
     }
-    if (!PyObject_TypeCheck(args[2], &EncoderType) || !PyObject_TypeCheck(args[3], &DecoderType)) {
-        PyErr_SetString(PyExc_TypeError, "exchange_sample: needs a protocol.ccodec FrameEncoder and StreamDecoder");
+    Py_buffer counts_view;
+    if (codec_args("exchange_sample", args + 2, &counts_view) < 0) {
         return NULL;
-    }
-    for (int i = 4; i < 6; i++) {
-        if (args[i] != Py_None && !PyByteArray_CheckExact(args[i])) {
-            PyErr_SetString(PyExc_TypeError, "exchange_sample: captures are bytearrays or None");
-            return NULL;
-        }
     }
     EncoderObject *enc = (EncoderObject *)args[2];
     DecoderObject *dec = (DecoderObject *)args[3];
-    Py_buffer counts_view;
-    if (PyObject_GetBuffer(args[6], &counts_view, PyBUF_WRITABLE | PyBUF_C_CONTIGUOUS) < 0) {
-        return NULL;
-    }
     int64_t counts[5];
-    if (counts_view.len < (Py_ssize_t)sizeof counts) {
-        PyBuffer_Release(&counts_view);
-        PyErr_SetString(PyExc_ValueError, "exchange_sample: counts must hold 5 int64");
-        return NULL;
-    }
     memcpy(counts, counts_view.buf, sizeof counts);
     if (counts[4] != 0) {
         PyBuffer_Release(&counts_view);
@@ -1503,24 +1514,15 @@ static PyObject *mod_exchange_periods(PyObject *self, PyObject *const *args, Py_
             return NULL;
         }
     }
+    if (!by_fd && (exchange == NULL || fw == NULL)) {
+        PyErr_SetString(PyExc_ValueError, "exchange_periods: null exchange function or instance");
+        return NULL;
+    }
     Py_ssize_t base = by_fd ? 3 : 2;
-    PyObject *enc_obj = PyTuple_GET_ITEM(target, base), *dec_obj = PyTuple_GET_ITEM(target, base + 1);
     PyObject *capture_out = PyTuple_GET_ITEM(target, base + 2), *capture_in = PyTuple_GET_ITEM(target, base + 3);
     PyObject *inbox = PyTuple_GET_ITEM(target, base + 5);
-    if ((!by_fd && (exchange == NULL || fw == NULL)) || !PyObject_TypeCheck(enc_obj, &EncoderType) ||
-        !PyObject_TypeCheck(dec_obj, &DecoderType) ||
-        (capture_out != Py_None && !PyByteArray_CheckExact(capture_out)) ||
-        (capture_in != Py_None && !PyByteArray_CheckExact(capture_in))) {
-        PyErr_SetString(PyExc_TypeError, "exchange_periods: target is not exchange_sample's arguments");
-        return NULL;
-    }
     Py_buffer counts_view;
-    if (PyObject_GetBuffer(PyTuple_GET_ITEM(target, base + 4), &counts_view, PyBUF_WRITABLE | PyBUF_C_CONTIGUOUS) < 0) {
-        return NULL;
-    }
-    if (counts_view.len < (Py_ssize_t)(5 * sizeof(int64_t))) {
-        PyBuffer_Release(&counts_view);
-        PyErr_SetString(PyExc_ValueError, "exchange_periods: counts must hold 5 int64");
+    if (codec_args("exchange_periods", &PyTuple_GET_ITEM(target, base), &counts_view) < 0) {
         return NULL;
     }
     int64_t *counts = (int64_t *)counts_view.buf;
@@ -1529,8 +1531,8 @@ static PyObject *mod_exchange_periods(PyObject *self, PyObject *const *args, Py_
         PyBuffer_Release(&counts_view);
         return NULL;
     }
-    EncoderObject *enc = (EncoderObject *)enc_obj;
-    DecoderObject *dec = (DecoderObject *)dec_obj;
+    EncoderObject *enc = (EncoderObject *)PyTuple_GET_ITEM(target, base);
+    DecoderObject *dec = (DecoderObject *)PyTuple_GET_ITEM(target, base + 1);
     PyTypeObject *telemetry_cls = classes[HIL_MSG_TELEMETRY].cls;
 
     answer_queue q;
