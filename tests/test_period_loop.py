@@ -130,6 +130,35 @@ def test_a_per_period_hook_runs_every_period_unless_idle(tmp_path, monkeypatch):
     assert idle_calls[0] < 600 and idle_calls[1] == 600     # C loop first, then the Python one
 
 
+class _Live:
+    """What a live stream takes from the recorder (hil.live.LiveStream's period/telemetry_row)."""
+
+    def __init__(self, every):
+        self.every, self.periods, self.rows = every, [], []
+
+    def period(self, k, truth, sample):
+        self.periods.append((k, tuple(truth), tuple(sample)))
+
+    def telemetry_row(self, row):
+        self.rows.append(tuple(row))
+
+
+def test_a_live_viewer_gets_the_same_rows_from_either_loop(tmp_path, monkeypatch):
+    lives = []
+
+    def watched(s):
+        live = _Live(every=7)
+        lives.append(live)
+        s.recorder.live = live
+        s.send_command(enable=True, speed_source="ekf", speed_ref_rpm=1500)
+        return s.run_periods(1500)
+    _same(tmp_path, monkeypatch, watched)
+    fast, slow = lives
+    assert fast.periods == slow.periods and len(fast.periods) >= 1500 // 7
+    assert fast.rows == slow.rows and len(fast.rows) >= 1500 // 7 - 1
+    assert all(k % 7 == 0 for k, _, _ in fast.periods) and all(r[0] % 7 == 0 for r in fast.rows)
+
+
 # ------------------------------------------------------------------ the loop alone
 
 _EXCHANGE = ctypes.CFUNCTYPE(ctypes.c_size_t, ctypes.c_void_p, ctypes.POINTER(ctypes.c_uint8),
@@ -207,9 +236,9 @@ class _Rig:
             self.sealed_rows[i].extend(self._rows(i)[len(self.sealed_rows[i]):])
         self.stage[3][:] = 0
 
-    def run(self, count, answer=0, stop=None):
+    def run(self, count, answer=0, stop=None, live_every=0):
         return ccodec.exchange_periods(self.target, self.sample, self.truth, self.step, self.stage,
-                                       self.seal, self.publish_every, count, stop, answer)
+                                       self.seal, self.publish_every, count, stop, answer, live_every)
 
 
 def test_plain_periods_are_taken_and_the_answers_after_gates_stay_queued():
@@ -266,6 +295,17 @@ def test_a_telemetry_flood_seals_the_batch_early():
     assert rig.run(5) == (5, 0, None)
     assert rig.sealed == 3 and rig.periods == [1, 2, 3, 4, 5]
     assert [r[0] for r in rig.telemetry] == [1, 1, 2, 2, 3, 3, 4, 4, 5, 5]
+
+
+def test_the_rows_a_live_view_takes_are_handed_back():
+    # a period that is a multiple of live_every is not begun
+    rig = _Rig({k: [Gates(k, 0)] for k in range(1, 11)})
+    assert rig.run(10, live_every=4) == (3, 1, None)
+    assert rig.periods == [1, 2, 3] and rig.counts[0] == 3
+    # a TELEMETRY of such a period is not taken: its period goes back with it at the front
+    rig = _Rig({1: [Gates(1, 0b100001)], 2: [_telemetry(9), Gates(2, 0b100001)]})
+    assert rig.run(10, live_every=3) == (1, 2, None)
+    assert list(rig.inbox) == [_telemetry(9), Gates(2, 0b100001)] and rig.telemetry == []
 
 
 def test_batches_are_sealed_and_a_closed_instance_is_not_called():

@@ -183,14 +183,12 @@ class Recorder:
         """What takes the next TELEMETRY message (a period loop binds it once per run)."""
         return self.telemetry
 
-    def batch_stage(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    def batch_stage(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """This batch's stage (sensors, truth, telemetry rows, and the int64 fill counts) for
         a period loop in C (protocol.ccodec.exchange_periods) that writes into it what period()
-        and telemetry() would and calls seal() when a part fills; None while a live viewer
-        follows (period() also feeds it). seal() empties the stage in place (the fill counts
-        to 0), never replacing its arrays."""
-        if self.live is not None:
-            return None
+        and telemetry() would and calls seal() when a part fills; it leaves to period() and
+        telemetry() the rows a live viewer takes (every `live.every`-th). seal() empties the
+        stage in place (the fill counts to 0), never replacing its arrays."""
         return self._stage
 
     def seal(self) -> None:

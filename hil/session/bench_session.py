@@ -466,20 +466,21 @@ class BenchSession:
         fast = tap.sample_exchanger() if tap is not None else None
         # The plain periods in between, each one the C loop (ccodec.exchange_periods: the same
         # steps, the same order, no Python frame) while nothing needs this loop: no mailbox or
-        # live viewer, no per-period stimulus, the answer kind known and no miss being counted;
-        # it hands back every period it does not take (see its docstring).
+        # per-period stimulus, the answer kind known and no miss being counted; it hands back
+        # every period it does not take (see its docstring), and a live viewer's rows.
         loop = None
         direct = False
-        stage = recorder.batch_stage()
-        if (tap is not None and stage is not None and mailbox is None
+        if (tap is not None and mailbox is None
                 and self.board_hello is not None
                 and (on_period is None or getattr(on_period, "idle", False))):
             target = tap.period_target(answer_timeout)
             if target is not None:     # (the tap made it with the C codec: already imported)
                 from protocol.ccodec import exchange_periods
                 if exchange_periods is not None:
-                    loop = (target, plant.sample, plant.truth, plant.step, stage, recorder.seal,
-                            publish_every)
+                    live = recorder.live        # its rows (every live.every-th) stay here
+                    loop = (target, plant.sample, plant.truth, plant.step, recorder.batch_stage(),
+                            recorder.seal, publish_every)
+                    live_every = live.every if live is not None else 0
                     direct = len(target) == 10  # the descriptor kind (LinkTap.period_target)
         done = 0
         while done < count:
@@ -488,7 +489,7 @@ class BenchSession:
             if loop is not None and not watchdog.consecutive and \
                     (tap.direct_ready if direct else tap.fast_ready):
                 answer = _ANSWER_CODES.get(self._answer_kind, -1)
-                ran, state, extra = exchange_periods(*loop, count - done, stop, answer)
+                ran, state, extra = exchange_periods(*loop, count - done, stop, answer, live_every)
                 if direct:
                     tap.settle_direct()
                 done += ran

@@ -1137,8 +1137,8 @@ static PyObject *exchange_period(void *fn_addr, void *fw, EncoderObject *enc, De
 /* ------------------------------------------------------------------ plain periods, in-process */
 
 PyDoc_STRVAR(exchange_periods_doc,
-"exchange_periods(target, sample, truth, step, rows, seal, batch, publish_every, count, stop,\n"
-"                 answer) -> (done, state, extra)\n\n"
+"exchange_periods(target, sample, truth, step, stage, seal, publish_every, count, stop, answer,\n"
+"                 live_every) -> (done, state, extra)\n\n"
 "The bench's lockstep period loop, in C, for a run of plain periods: no Python frame runs\n"
 "between them. target is either exchange_sample's first eight arguments (exchange, fw, encoder,\n"
 "decoder, capture_out, capture_in, counts, inbox: a firmware in this process), or ten for a\n"
@@ -1148,19 +1148,21 @@ PyDoc_STRVAR(exchange_periods_doc,
 "fields); SAMPLE(k) is encoded and captured; in-process it goes through the firmware's\n"
 "exchange and its answers are decoded at once, over a descriptor it is written in full (within\n"
 "write_timeout_s) and the answers are read as they come (poll, read, without the GIL) until\n"
-"the period is taken or answer_timeout_s after the write has passed; the record: k, truth()\n"
-"and s[1:6] appended to rows = (periods, truths, sensors, telemetry), seal() once periods\n"
-"holds `batch` (over a descriptor made between the write and the wait, while the board\n"
-"computes); the answers are queued behind what inbox already held and taken from the front as\n"
-"the bench's period loop takes its inbox: a TELEMETRY is appended to rows[3] as its message\n"
-"object, and the first GATES (answer 0) or DUTY (answer 1) for period k, with no shoot-through,\n"
-"ends the period: step(gates) or step(duty=(d0/65535.0, d1/65535.0, d2/65535.0)), what follows\n"
-"it stays queued; then stop(), when given, may end the run. counts gains frames out, frames in,\n"
-"bytes out, bytes in. state: 0 `count` periods ran; 1 the next period was not begun here\n"
-"(k % publish_every == 0, or counts[4] set: the instance closed): the caller runs it; 2 period\n"
-"k was sampled, recorded and sent, and inbox holds what is left of its answers from the first\n"
-"one not taken here (none: no answer in time), for the caller to go on with, extra being when\n"
-"the SAMPLE was written (time.monotonic()) over a descriptor; 3 stop() said stop; 4 the\n"
+"the period is taken or answer_timeout_s after the write has passed; the record: k, the\n"
+"sample's fields and truth() written into `stage` (Recorder.batch_stage: sensors, truth and\n"
+"telemetry rows, fill counts), seal() when a part of it is full (over a descriptor between the\n"
+"write and the wait, while the board computes); the answers are queued behind what inbox\n"
+"already held and taken from the front as the bench's period loop takes its inbox: a\n"
+"TELEMETRY is written into the stage, and the first GATES (answer 0) or DUTY (answer 1) for\n"
+"period k, with no shoot-through, ends the period: step(gates) or step(duty=(d0/65535.0,\n"
+"d1/65535.0, d2/65535.0)), what follows it stays queued; then stop(), when given, may end the\n"
+"run. counts gains frames out, frames in, bytes out, bytes in. With live_every (not 0) the\n"
+"periods and TELEMETRY rows a live view takes (multiples of live_every) are left to the\n"
+"caller. state: 0 `count` periods ran; 1 the next period was not begun here (k % publish_every\n"
+"== 0, k % live_every == 0, or counts[4] set: the instance closed): the caller runs it; 2\n"
+"period k was sampled, recorded and sent, and inbox holds what is left of its answers from the\n"
+"first one not taken here (none: no answer in time), for the caller to go on with, extra being\n"
+"when the SAMPLE was written (time.monotonic()) over a descriptor; 3 stop() said stop; 4 the\n"
 "descriptor failed (period k recorded, not stepped), extra = (errno, what). The queue left\n"
 "over always goes back to inbox as message objects, so the caller finds the state its own\n"
 "loop would have left; extra is None otherwise.");
@@ -1414,13 +1416,17 @@ static int record_telemetry(stage_t *st, const hil_msg *m, PyObject *obj)
 /* The answers queued, taken from the front as BenchSession._run_lockstep takes its inbox: a
  * TELEMETRY is written to the recorder's stage (record_telemetry), and the first GATES (answer 0) or DUTY
  * (answer 1) for period k with no shoot-through is taken into *gates or *duty. 1 taken; 0 the
- * queue ran out first; 2 its front is an answer this loop does not take; -1 with an exception. */
-static int take_answers(answer_queue *q, unsigned long k, long answer, stage_t *st,
+ * queue ran out first; 2 its front is an answer this loop does not take (or a TELEMETRY of a
+ * period the live view takes, a multiple of live_every when it is not 0); -1 with an exception. */
+static int take_answers(answer_queue *q, unsigned long k, long answer, unsigned long live_every, stage_t *st,
                         long *gates, uint16_t duty[3])
 {
     while (q->head < q->n) {
         int i = q->head;
         const hil_msg *a = &q->m[i];
+        if (a->type == HIL_MSG_TELEMETRY && live_every > 0u && a->u.telemetry.period % live_every == 0u) {
+            return 2;                           /* a row the live view takes: the caller's */
+        }
         if (a->type == HIL_MSG_TELEMETRY) {
             PyObject *o = q->obj[i];
             q->obj[i] = NULL;
@@ -1461,8 +1467,8 @@ static PyObject *loop_result(Py_ssize_t done, int state, PyObject *extra)
 static PyObject *mod_exchange_periods(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     (void)self;
-    if (nargs != 10) {
-        PyErr_SetString(PyExc_TypeError, "exchange_periods takes 10 arguments");
+    if (nargs != 11) {
+        PyErr_SetString(PyExc_TypeError, "exchange_periods takes 11 arguments");
         return NULL;
     }
     if (!ready()) {
@@ -1478,6 +1484,7 @@ static PyObject *mod_exchange_periods(PyObject *self, PyObject *const *args, Py_
     Py_ssize_t publish_every = PyLong_AsSsize_t(args[6]);
     Py_ssize_t count = PyLong_AsSsize_t(args[7]);
     long answer = PyLong_AsLong(args[9]);
+    unsigned long live_every = PyLong_AsUnsignedLong(args[10]);
     if (PyErr_Occurred()) {
         return NULL;
     }
@@ -1572,8 +1579,15 @@ static PyObject *mod_exchange_periods(PyObject *self, PyObject *const *args, Py_
         }
         Py_DECREF(r);
         for (Py_ssize_t i = 0; i < held; i++) {
-            q.obj[q.n] = Py_NewRef(PyList_GET_ITEM(items, i));
+            PyObject *o = PyList_GET_ITEM(items, i);
+            unsigned long period = PyLong_AsUnsignedLong(SLOT(o, classes[HIL_MSG_TELEMETRY].off[0]));
+            if (PyErr_Occurred()) {             /* (not a period: its row says so later) */
+                PyErr_Clear();
+                period = 1u;
+            }
+            q.obj[q.n] = Py_NewRef(o);
             q.m[q.n].type = HIL_MSG_TELEMETRY;
+            q.m[q.n].u.telemetry.period = (uint32_t)period;
             q.n++;
         }
         Py_DECREF(items);
@@ -1601,7 +1615,7 @@ static PyObject *mod_exchange_periods(PyObject *self, PyObject *const *args, Py_
             failed = 1;
             break;
         }
-        if (k % (unsigned long)publish_every == 0u) {
+        if (k % (unsigned long)publish_every == 0u || (live_every > 0u && k % live_every == 0u)) {
             Py_DECREF(s);
             state = LOOP_HANDED;
             break;
@@ -1648,7 +1662,7 @@ static PyObject *mod_exchange_periods(PyObject *self, PyObject *const *args, Py_
          * SAMPLE's one deadline */
         long gates = -1;
         uint16_t duty[3] = {0, 0, 0};
-        int taken = spill != NULL ? 2 : take_answers(&q, k, answer, &st, &gates, duty);
+        int taken = spill != NULL ? 2 : take_answers(&q, k, answer, live_every, &st, &gates, duty);
         while (by_fd && taken == 0) {
             double left = sent_at + answer_timeout_s - monotonic_s();
             int ready_now = left > 0.0 ? fd_wait(fd, POLLIN, left) : 0;
@@ -1676,7 +1690,7 @@ static PyObject *mod_exchange_periods(PyObject *self, PyObject *const *args, Py_
                 taken = -1;
                 break;
             }
-            taken = spill != NULL ? 2 : take_answers(&q, k, answer, &st, &gates, duty);
+            taken = spill != NULL ? 2 : take_answers(&q, k, answer, live_every, &st, &gates, duty);
         }
         if (taken < 0) {
             failed = 1;
