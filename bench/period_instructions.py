@@ -11,7 +11,6 @@ then split into the C functions that do its work, by their inclusive counts:
   ``firmware`` is the stub itself (hil_fw_exchange: its decoder, control law and encoder);
 - ``answer_objects``: the TELEMETRY message objects the recorder keeps (message_object);
 - ``plant_kernel``: the plant's C sample, truth and RK4 (plant_rt/c/_plantnet.c);
-- ``log_rows``: the batch conversion of rows to float64 (protocol.ccodec.fields_into);
 - ``lz4`` and ``crc32``: the MCAP chunks' compression and checksums;
 - ``python_and_objects``: the rest: the interpreter running the period loop, the plant's and
   recorder's Python, object allocation, the MCAP writer's Python.
@@ -43,7 +42,6 @@ PARTS = {
     "firmware": ("hil_fw_exchange",),
     "answer_objects": ("message_object",),
     "plant_kernel": ("mod_sample", "mod_truth", "mod_advance"),
-    "log_rows": ("mod_fields_into",),
     "lz4": ("LZ4_compress_fast_continue",),
     "crc32": ("crc32_z",),
 }
@@ -86,7 +84,7 @@ def per_period(kind: str, periods: int, split: bool = False) -> dict:
             a, b = _inclusive(short), _inclusive(long)
             parts = {name: round(sum(b.get(f, 0) - a.get(f, 0) for f in funcs) / periods)
                      for name, funcs in PARTS.items()}
-            top = ("exchange", "answer_objects", "plant_kernel", "log_rows", "lz4", "crc32")
+            top = ("exchange", "answer_objects", "plant_kernel", "lz4", "crc32")
             parts["python_and_objects"] = round(total - sum(parts[p] for p in top))
             out["parts"] = parts
     return out

@@ -32,7 +32,7 @@ from protocol.codec import (  # noqa: F401 - re-exported: the API of protocol.co
 from protocol.messages import MESSAGE_CLASSES
 
 BUILD_DIR = Path(__file__).resolve().parent / "c" / "build"
-_API = ("FrameEncoder", "StreamDecoder", "encode_frame", "crc16", "exchange_sample", "fields_into",
+_API = ("FrameEncoder", "StreamDecoder", "encode_frame", "crc16", "exchange_sample",
         "exchange_periods", "records_into", "stage_period", "stage_telemetry")
 
 
@@ -75,7 +75,6 @@ else:
     encode_frame = _ext.encode_frame
     crc16 = _ext.crc16
     exchange_sample = _ext.exchange_sample
-    fields_into = _ext.fields_into
     # a build older than the period loop has none: the bench's loop then runs every period
     exchange_periods = getattr(_ext, "exchange_periods", None)
     records_into = getattr(_ext, "records_into", None)

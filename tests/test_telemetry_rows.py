@@ -1,6 +1,6 @@
-"""TELEMETRY rows made by the C codec (protocol.ccodec.fields_into; the recorder's
-stage_telemetry writes the same fields in the same order), as the recorder keeps and logs them:
-values in the SPEC's field order, errors, and the same rows with and without the C codec."""
+"""TELEMETRY rows written by the C codec (protocol.ccodec.stage_telemetry, what the recorder
+and the C period loop write), as the recorder keeps and logs them: values in the SPEC's field
+order, errors, and the same rows with and without the C codec."""
 from __future__ import annotations
 
 import numpy as np
@@ -9,7 +9,7 @@ import pytest
 from hil.logs import recorder as recorder_module
 from hil.logs.recorder import TELEMETRY_FIELDS, Recorder
 from protocol import ccodec
-from protocol.messages import Duty, Gates, Telemetry
+from protocol.messages import Gates, Telemetry
 
 needs_c = pytest.mark.skipif(not ccodec.AVAILABLE, reason=ccodec.UNAVAILABLE_REASON)
 
@@ -18,44 +18,48 @@ def _telemetry(k: int) -> Telemetry:
     return Telemetry(k, 3, 2, 1, 0x21, *[0.25 * k + i for i in range(12)])
 
 
+def _stage(telemetry_rows: int):
+    """A recorder stage (Recorder.batch_stage's layout) with room for `telemetry_rows`."""
+    return (np.zeros((4, 6)), np.zeros((4, 19)), np.zeros((telemetry_rows, 17)),
+            np.zeros(2, dtype=np.int64))
+
+
 @needs_c
-def test_fields_into_writes_telemetry_rows_in_the_spec_field_order():
+def test_stage_telemetry_writes_telemetry_rows_in_the_spec_field_order():
     """Expected rows written out by hand from the fields (SPEC order: period, sector,
     speed_source, state, gates, then the twelve floats), never from the function itself."""
-    buf = bytearray(8 * 40)
     first = Telemetry(70000, 6, 1, 2, 0x2A, -1.5, 2.0, 3.25, 4.0, 5.0, -3.0, 3.0, 0.0928, 1.5, -2.0,
                       0.125, -0.125)
     second = Telemetry(70001, 1, 0, 2, 0x09, 0.0, -0.0, 1e-300, 1e300, -7.5, 0.5, -0.5, 0.1, 0.0, 0.0,
                        3.0, -3.0)
-    assert ccodec.fields_into([first, second], buf, 8) == 2
-    got = np.frombuffer(buf, dtype=np.float64)
-    assert got[0] == 0.0 and got[35:].tolist() == [0.0] * 5
-    assert got[1:18].tolist() == [70000.0, 6.0, 1.0, 2.0, 42.0, -1.5, 2.0, 3.25, 4.0, 5.0, -3.0, 3.0,
-                                  0.0928, 1.5, -2.0, 0.125, -0.125]
-    assert got[18:35].tolist() == [70001.0, 1.0, 0.0, 2.0, 9.0, 0.0, -0.0, 1e-300, 1e300, -7.5, 0.5,
-                                   -0.5, 0.1, 0.0, 0.0, 3.0, -3.0]
-    assert ccodec.fields_into([], buf, 0) == 0
-    assert ccodec.fields_into([Gates(5, 0x21)], buf, 0) == 1 and got[:2].tolist() == [5.0, 33.0]
+    stage = _stage(3)
+    sealed = []
+    for msg in (first, second):
+        ccodec.stage_telemetry(stage, lambda: sealed.append(1), msg)
+    got = stage[2]
+    assert stage[3].tolist() == [0, 2] and not sealed and got[2].tolist() == [0.0] * 17
+    assert got[0].tolist() == [70000.0, 6.0, 1.0, 2.0, 42.0, -1.5, 2.0, 3.25, 4.0, 5.0, -3.0, 3.0,
+                               0.0928, 1.5, -2.0, 0.125, -0.125]
+    assert got[1].tolist() == [70001.0, 1.0, 0.0, 2.0, 9.0, 0.0, -0.0, 1e-300, 1e300, -7.5, 0.5,
+                               -0.5, 0.1, 0.0, 0.0, 3.0, -3.0]
 
 
 @needs_c
-def test_fields_into_refuses_what_does_not_fit_or_is_not_a_number_by_name():
-    buf = bytearray(8 * 40)
+def test_stage_telemetry_refuses_what_does_not_fit_or_is_not_a_number_by_name():
     msg = _telemetry(1)
-    with pytest.raises(ValueError, match="2 rows of 136 bytes from offset 64 do not fit"):
-        ccodec.fields_into([msg, msg], buf, 64)
-    with pytest.raises(ValueError, match="do not fit"):
-        ccodec.fields_into([msg], buf, -8)
-    with pytest.raises(TypeError, match="row 0, Duty 'duty' is tuple"):
-        ccodec.fields_into([Duty(1, (1, 2, 3))], buf, 0)
-    with pytest.raises(TypeError, match="row 1 is a Gates among Telemetry messages"):
-        ccodec.fields_into([msg, Gates(1, 0)], buf, 0)
-    with pytest.raises(TypeError, match="float is neither a protocol message nor a tuple"):
-        ccodec.fields_into([1.5], buf, 0)
-    with pytest.raises(TypeError, match="rows must be a list"):
-        ccodec.fields_into((msg,), buf, 0)
+    full = _stage(2)
+    full[3][1] = 2
+    with pytest.raises(ValueError, match="do not fit together"):
+        ccodec.stage_telemetry(full, lambda: None, msg)
+    with pytest.raises(TypeError, match="row 0, Telemetry 'sector' is str, not a number"):
+        ccodec.stage_telemetry(_stage(2), lambda: None, Telemetry(1, "x", 0, 1, 0, *([0.5] * 12)))
+    with pytest.raises(TypeError, match="not a Telemetry message"):
+        ccodec.stage_telemetry(_stage(2), lambda: None, Gates(1, 0))
+    with pytest.raises(TypeError, match="stage is"):
+        ccodec.stage_telemetry((msg,), lambda: None, msg)
     with pytest.raises(BufferError):
-        ccodec.fields_into([msg], bytes(200), 0)
+        ccodec.stage_telemetry((bytes(48), bytes(152), bytes(272), np.zeros(2, np.int64)),
+                               lambda: None, msg)
 
 
 def test_recorder_telemetry_rows_are_the_same_with_and_without_the_c_codec(monkeypatch, tmp_path):

@@ -178,11 +178,6 @@ class Recorder:
         if live is not None and msg.period % live.every == 0:
             live.telemetry_row(telemetry_row(msg))
 
-    @property
-    def telemetry_sink(self):
-        """What takes the next TELEMETRY message (a period loop binds it once per run)."""
-        return self.telemetry
-
     def batch_stage(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """This batch's stage (sensors, truth, telemetry rows, and the int64 fill counts) for
         a period loop in C (protocol.ccodec.exchange_periods) that writes into it what period()

@@ -453,7 +453,7 @@ class BenchSession:
         publish_every = self.publish_every
         tap = self.tap
         clock = time.monotonic
-        record_telemetry = recorder.telemetry_sink
+        record_telemetry = recorder.telemetry
         # what the link tap has already decoded is taken without a call (its recv() would
         # pop the same queue first); an untapped link has no such queue
         inbox = tap.inbox if tap is not None else ()
@@ -469,11 +469,11 @@ class BenchSession:
         # per-period stimulus, the answer kind known and no miss being counted; it hands back
         # every period it does not take (see its docstring), and a live viewer's rows.
         loop = None
-        direct = False
+        direct = fast is None          # the descriptor kind (LinkTap.descriptor_target)
         if (tap is not None and mailbox is None
                 and self.board_hello is not None
                 and (on_period is None or getattr(on_period, "idle", False))):
-            target = tap.period_target(answer_timeout)
+            target = tap.descriptor_target(answer_timeout) if direct else fast.args
             if target is not None:     # (the tap made it with the C codec: already imported)
                 from protocol.ccodec import exchange_periods
                 if exchange_periods is not None:
@@ -481,7 +481,6 @@ class BenchSession:
                     loop = (target, plant.sample, plant.truth, plant.step, recorder.batch_stage(),
                             recorder.seal, publish_every)
                     live_every = live.every if live is not None else 0
-                    direct = len(target) == 10  # the descriptor kind (LinkTap.period_target)
         done = 0
         while done < count:
             pending = False          # period k sampled, recorded and sent by the C loop

@@ -94,7 +94,7 @@ class LinkTap:
         # them the last take_capture() already counted
         self._exchange_counts = None
         self._exchange_taken = (0, 0)
-        # the descriptor loop's own counts (period_target), and how much of them the link's
+        # the descriptor loop's own counts (descriptor_target), and how much of them the link's
         # counters already have
         self._direct_counts = None
         self._direct_settled = (0, 0, 0)
@@ -215,55 +215,54 @@ class LinkTap:
     def send_bytes(self, data: bytes) -> None:
         self._pass("out", data)
 
+    def _c_codec(self) -> bool:
+        """This tap frames and decodes with the C codec (what its C exchanges need)."""
+        from protocol import ccodec
+
+        return (ccodec.AVAILABLE and isinstance(self._encoder, ccodec.FrameEncoder)
+                and isinstance(self._decoder, ccodec.StreamDecoder))
+
+    def _count_with(self, counts) -> None:
+        """The C exchange's counts (frames out, frames in, ...) from now on: take_capture()
+        counts the captured frames from them."""
+        if self._exchange_counts is not counts:
+            self._exchange_counts = counts
+            self._exchange_taken = (counts[0], counts[1])
+
     def sample_exchanger(self):
         """A function (k, adc_i1, adc_i2, adc_vdc, encoder, status) that sends SAMPLE(k) and
         queues the answers in one C call, for a firmware library in this process with the C
         codec; None where that does not apply (another link, the Python codec). It works only
-        while no link fault is active and nothing is queued: the caller checks `fast_ready`."""
+        while no link fault is active and nothing is queued: the caller checks `fast_ready`.
+        Its bound arguments (`.args`) are the in-process target of protocol.ccodec's period
+        loop, exchange_periods."""
         from protocol import ccodec
 
         make = getattr(self.link, "sample_exchange", None)
-        if (make is None or not ccodec.AVAILABLE
-                or not isinstance(self._encoder, ccodec.FrameEncoder)
-                or not isinstance(self._decoder, ccodec.StreamDecoder)
-                or self.link.exchange_target() is None):
+        if make is None or not self._c_codec() or self.link.exchange_target() is None:
             return None
-        counts = self.link.exchange_counts
-        if self._exchange_counts is not counts:
-            self._exchange_counts = counts
-            self._exchange_taken = (counts[0], counts[1])
+        self._count_with(self.link.exchange_counts)
         return make(ccodec.exchange_sample, self._encoder, self._decoder, self.captured["out"],
                     self.captured["in"], self.inbox)
 
-    def period_target(self, answer_timeout_s: float):
-        """What protocol.ccodec.exchange_periods drives this link through, or None where it
-        does not apply (another link, the Python codec): the in-process exchange's arguments
-        (sample_exchanger), or for a link with a file descriptor (SerialLink on a device or a
-        pseudo-terminal) the descriptor, the answer wait, the write timeout, this tap's codec,
-        captures, queue and partial-frame buffer, and counts of its own (frames out, frames
-        in, bytes out, bytes in), which settle_direct() hands to the link's counters. The
-        in-process kind runs while `fast_ready`, the descriptor kind while `direct_ready`."""
-        fast = self.sample_exchanger()
-        if fast is not None:
-            return fast.args
-        from protocol import ccodec
-
+    def descriptor_target(self, answer_timeout_s: float):
+        """protocol.ccodec.exchange_periods' target for a link with a file descriptor
+        (SerialLink on a device or a pseudo-terminal), or None (another link, the Python
+        codec): the descriptor, the answer wait, the write timeout, this tap's codec,
+        captures, queue and partial-frame buffer, and counts of its own (frames out, frames in,
+        bytes out, bytes in), which settle_direct() hands to the link's counters. It runs
+        while `direct_ready`."""
         descriptor = getattr(self.link, "descriptor", None)
         fd = descriptor() if descriptor is not None else None
-        if (fd is None or not ccodec.AVAILABLE
-                or not isinstance(self._encoder, ccodec.FrameEncoder)
-                or not isinstance(self._decoder, ccodec.StreamDecoder)):
+        if fd is None or not self._c_codec():
             return None
         if self._direct_counts is None:
             self._direct_counts = array("q", [0] * 5)
             self._direct_settled = (0, 0, 0)
-        counts = self._direct_counts
-        if self._exchange_counts is not counts:
-            self._exchange_counts = counts
-            self._exchange_taken = (counts[0], counts[1])
+        self._count_with(self._direct_counts)
         return (fd, float(answer_timeout_s), float(self.link.write_timeout_s), self._encoder,
-                self._decoder, self.captured["out"], self.captured["in"], counts, self.inbox,
-                self._partial)
+                self._decoder, self.captured["out"], self.captured["in"], self._direct_counts,
+                self.inbox, self._partial)
 
     @property
     def direct_ready(self) -> bool:

@@ -1344,7 +1344,27 @@ static int stage_seal_if_full(stage_t *st)
     return 0;
 }
 
-static int value_of(PyObject *v, double *d, Py_ssize_t r, const msg_class *mc, const char *field, Py_ssize_t i);
+/* v as a double into *d; -1 with TypeError naming row r and the field (a message's class and
+ * field name, or the tuple's index i) otherwise. */
+static int value_of(PyObject *v, double *d, Py_ssize_t r, const msg_class *mc, const char *field, Py_ssize_t i)
+{
+    if (v != NULL && PyFloat_CheckExact(v)) {
+        *d = PyFloat_AS_DOUBLE(v);
+        return 0;
+    }
+    if (v != NULL && (PyFloat_Check(v) || PyLong_Check(v))) {
+        *d = PyFloat_AsDouble(v);
+        return (*d == -1.0 && PyErr_Occurred()) ? -1 : 0;
+    }
+    const char *kind = v == NULL ? "unset" : Py_TYPE(v)->tp_name;
+    if (mc != NULL) {
+        PyErr_Format(PyExc_TypeError, "recorder: row %zd, %s '%s' is %s, not a number", r,
+                     mc->cls->tp_name, field, kind);
+    } else {
+        PyErr_Format(PyExc_TypeError, "recorder: row %zd, value %zd is %s, not a number", r, i, kind);
+    }
+    return -1;
+}
 
 /* A period's rows, what Recorder.period writes: k and the sample's five fields (sensors), the truth
  * tuple; then seal() if the stage is full. A value that is not an int or a float: TypeError, and
@@ -1776,128 +1796,6 @@ static PyObject *mod_exchange_periods(PyObject *self, PyObject *const *args, Py_
     return loop_result(done, state, extra);
 }
 
-PyDoc_STRVAR(fields_into_doc,
-"fields_into(rows, buffer, offset) -> count\n\n"
-"Writes `rows`, a list of decoded messages (instances of one of protocol/messages.py's\n"
-"classes, all of the same class: their fields in declaration order) or of tuples of numbers\n"
-"(all of the first one's length: their items), as native float64 values into the writable\n"
-"`buffer` from byte `offset` on, one row after the other, and returns how many rows it wrote:\n"
-"a recorder's batch of rows with no Python float made. Every value must be an int or a float\n"
-"(TypeError naming the row and field otherwise); nothing is written unless every row fits\n"
-"(ValueError).");
-
-static const msg_class *class_of(PyObject *msg, int *type)
-{
-    for (int t = HIL_MSG_HELLO; t < NTYPES; t++) {
-        if (classes[t].cls != NULL && Py_IS_TYPE(msg, classes[t].cls)) {
-            *type = t;
-            return &classes[t];
-        }
-    }
-    PyErr_Format(PyExc_TypeError, "fields_into: %s is neither a protocol message nor a tuple",
-                 Py_TYPE(msg)->tp_name);
-    return NULL;
-}
-
-/* v as a double into *d; -1 with TypeError naming row r and the field (a message's class and
- * field name, or the tuple's index i) otherwise. */
-static int value_of(PyObject *v, double *d, Py_ssize_t r, const msg_class *mc, const char *field, Py_ssize_t i)
-{
-    if (v != NULL && PyFloat_CheckExact(v)) {
-        *d = PyFloat_AS_DOUBLE(v);
-        return 0;
-    }
-    if (v != NULL && (PyFloat_Check(v) || PyLong_Check(v))) {
-        *d = PyFloat_AsDouble(v);
-        return (*d == -1.0 && PyErr_Occurred()) ? -1 : 0;
-    }
-    const char *kind = v == NULL ? "unset" : Py_TYPE(v)->tp_name;
-    if (mc != NULL) {
-        PyErr_Format(PyExc_TypeError, "fields_into: row %zd, %s '%s' is %s, not a number", r,
-                     mc->cls->tp_name, field, kind);
-    } else {
-        PyErr_Format(PyExc_TypeError, "fields_into: row %zd, value %zd is %s, not a number", r, i, kind);
-    }
-    return -1;
-}
-
-static PyObject *mod_fields_into(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
-{
-    (void)self;
-    if (nargs != 3) {
-        PyErr_SetString(PyExc_TypeError, "fields_into takes 3 arguments");
-        return NULL;
-    }
-    if (!ready()) {
-        return NULL;
-    }
-    if (!PyList_Check(args[0])) {
-        PyErr_SetString(PyExc_TypeError, "fields_into: rows must be a list");
-        return NULL;
-    }
-    Py_ssize_t offset = PyLong_AsSsize_t(args[2]);
-    if (offset == -1 && PyErr_Occurred()) {
-        return NULL;
-    }
-    Py_ssize_t rows = PyList_GET_SIZE(args[0]);
-    if (rows == 0) {
-        return PyLong_FromLong(0);
-    }
-    PyObject *first = PyList_GET_ITEM(args[0], 0);
-    const msg_class *mc = NULL;
-    int type = 0;
-    Py_ssize_t width;
-    if (PyTuple_CheckExact(first)) {
-        width = PyTuple_GET_SIZE(first);
-    } else {
-        mc = class_of(first, &type);
-        if (mc == NULL) {
-            return NULL;
-        }
-        width = mc->nfields;
-    }
-    Py_buffer view;
-    if (PyObject_GetBuffer(args[1], &view, PyBUF_WRITABLE | PyBUF_C_CONTIGUOUS) < 0) {
-        return NULL;
-    }
-    size_t row_size = (size_t)width * sizeof(double);
-    if (offset < 0 || (size_t)offset > (size_t)view.len ||
-        (row_size > 0u && ((size_t)view.len - (size_t)offset) / row_size < (size_t)rows)) {
-        PyBuffer_Release(&view);
-        return PyErr_Format(PyExc_ValueError, "fields_into: %zd rows of %zu bytes from offset %zd do not "
-                            "fit a buffer of %zd", rows, row_size, offset, view.len);
-    }
-    /* Converted row by row into the buffer; on an error the rows before stay written and the
-     * exception tells the caller that the batch is not whole. */
-    double *out = (double *)(void *)((char *)view.buf + offset);
-    for (Py_ssize_t r = 0; r < rows; r++) {
-        PyObject *row = PyList_GET_ITEM(args[0], r);
-        if (mc == NULL) {
-            if (!PyTuple_CheckExact(row) || PyTuple_GET_SIZE(row) != width) {
-                PyBuffer_Release(&view);
-                return PyErr_Format(PyExc_TypeError, "fields_into: row %zd is not a tuple of %zd values", r,
-                                    width);
-            }
-        } else if (!Py_IS_TYPE(row, mc->cls)) {
-            PyBuffer_Release(&view);
-            return PyErr_Format(PyExc_TypeError, "fields_into: row %zd is a %s among %s messages", r,
-                                Py_TYPE(row)->tp_name, mc->cls->tp_name);
-        }
-        for (Py_ssize_t i = 0; i < width; i++) {
-            double d;
-            int rc = mc == NULL ? value_of(PyTuple_GET_ITEM(row, i), &d, r, NULL, NULL, i)
-                                : value_of(SLOT(row, mc->off[i]), &d, r, mc, field_names[type][i], i);
-            if (rc < 0) {
-                PyBuffer_Release(&view);
-                return NULL;
-            }
-            memcpy(out + (size_t)r * (size_t)width + (size_t)i, &d, sizeof d);
-        }
-    }
-    PyBuffer_Release(&view);
-    return PyLong_FromSsize_t(rows);
-}
-
 PyDoc_STRVAR(stage_period_doc,
 "stage_period(stage, seal, k, truth, sample) -> None\n\n"
 "Recorder.period in one call: k and the sample's adc_i1, adc_i2, adc_vdc, encoder and status (the\n"
@@ -2136,7 +2034,6 @@ static PyMethodDef module_methods[] = {
     {"encode_frame", (PyCFunction)(void (*)(void))mod_encode_frame, METH_FASTCALL, encode_frame_doc},
     {"crc16", mod_crc16, METH_O, crc16_doc},
     {"exchange_sample", (PyCFunction)(void (*)(void))mod_exchange_sample, METH_FASTCALL, exchange_sample_doc},
-    {"fields_into", (PyCFunction)(void (*)(void))mod_fields_into, METH_FASTCALL, fields_into_doc},
     {"exchange_periods", (PyCFunction)(void (*)(void))mod_exchange_periods, METH_FASTCALL, exchange_periods_doc},
     {"records_into", (PyCFunction)(void (*)(void))mod_records_into, METH_FASTCALL, records_into_doc},
     {"stage_period", (PyCFunction)(void (*)(void))mod_stage_period, METH_FASTCALL, stage_period_doc},
