@@ -11,7 +11,8 @@ then split into the C functions that do its work, by their inclusive counts:
   ``firmware`` is the stub itself (hil_fw_exchange: its decoder, control law and encoder);
 - ``answer_objects``: the TELEMETRY message objects the recorder keeps (message_object);
 - ``plant_kernel``: the plant's C sample, truth and RK4 (plant_rt/c/_plantnet.c);
-- ``lz4`` and ``crc32``: the MCAP chunks' compression and checksums;
+- ``lz4`` and ``crc32``: the MCAP chunks' compression and checksums (ISA-L's CRC for the
+  chunks, zlib's for the small records: hil.logs.mcap_writer.crc32);
 - ``python_and_objects``: the rest: the interpreter running the period loop, the plant's and
   recorder's Python, object allocation, the MCAP writer's Python.
 
@@ -43,7 +44,7 @@ PARTS = {
     "answer_objects": ("message_object",),
     "plant_kernel": ("mod_sample", "mod_truth", "mod_advance"),
     "lz4": ("LZ4_compress_fast_continue",),
-    "crc32": ("crc32_z",),
+    "crc32": ("crc32_z", "isal_zlib_crc32"),   # zlib's below 16 KiB, ISA-L's for the chunks
 }
 
 

@@ -533,3 +533,35 @@ def test_hand_serialized_schemas_are_the_bytes_google_protobuf_writes(message_na
             message_name, [(n, FIXED_TYPES[t][0]) for n, t in fields])
     assert bytes_descriptor_set(message_name) == _protobuf_descriptor_set(
         message_name, [("count", f.TYPE_FIXED32), ("data", f.TYPE_BYTES)])
+
+
+def test_the_logs_crc32_is_zlibs_on_both_sides_of_the_isal_threshold():
+    """mcap_writer.crc32 hands big buffers to ISA-L: the same CRC-32 as zlib's (MCAP's), for
+    every length around the hand-over, from any starting CRC, for bytes and memoryview slices;
+    and a file whose chunks are over the threshold passes the mcap package's CRC checks."""
+    import zlib
+
+    from hil.logs import mcap_writer
+
+    data = np.random.default_rng(3).integers(0, 256, mcap_writer._ISAL_CRC_FROM + 70_000,
+                                              dtype=np.uint8).tobytes()
+    edge = mcap_writer._ISAL_CRC_FROM
+    for n in (0, 1, 9, edge - 1, edge, edge + 1, edge + 65_536):
+        for start in (0, 0xDEADBEEF):
+            assert mcap_writer.crc32(data[:n], start) == zlib.crc32(data[:n], start), (n, start)
+            assert mcap_writer.crc32(memoryview(data)[3:3 + n], start) == zlib.crc32(data[3:3 + n], start)
+    assert mcap_writer.crc32(b"123456789") == 0xCBF43926      # the CRC-32 check value
+    assert mcap_writer._isal_crc32 is not None                 # the big buffers went to ISA-L
+
+
+def test_a_log_of_full_chunks_passes_the_mcap_packages_crc_checks(tmp_path):
+    path = tmp_path / "big.mcap"
+    log = McapLog(path, chunk_size=64 * 1024)
+    ch = log.add_fixed_channel("/x", "hil.X", [("a", "double"), ("b", "double")])
+    rng = np.random.default_rng(5)
+    ch.write_many(np.arange(20_000, dtype=np.uint64) * 1000, rng.standard_normal((20_000, 2)))
+    log.close()
+    with open(path, "rb") as f:
+        messages = list(SeekingReader(f, validate_crcs=True).iter_messages())
+    assert len(messages) == 20_000
+    assert len(read_log(path)["/x"].fields["a"]) == 20_000

@@ -94,3 +94,24 @@ def test_records_into_checks_before_writing():
                             np.array([1.0, 3.0]))
     with pytest.raises(ValueError, match="does not fit a 40-byte record"):
         ccodec.records_into(out, 0, template, b"d", (33,), np.array([1], np.uint64), np.array([1.0]))
+
+
+@pytest.mark.parametrize("code, fits, fails", [
+    ("I", [0.0, 4294967295.0], [-1.0, 4294967296.0, 0.5, math.inf, math.nan]),
+    ("i", [-2147483648.0, 2147483647.0], [-2147483649.0, 2147483648.0, -0.5, -math.inf, math.nan]),
+    ("Q", [0.0, 2.0 ** 63, 2.0 ** 64 - 2048], [-1.0, 2.0 ** 64, 1.5, math.inf, math.nan]),
+    ("q", [-(2.0 ** 63), 2.0 ** 63 - 1024], [2.0 ** 63, -(2.0 ** 63) - 2048, 0.25, -math.inf, math.nan]),
+    ("f", [3.4028234663852886e38, math.inf, math.nan], [3.5e38, -1e39]),
+])
+def test_records_into_takes_each_types_range_to_its_ends(code, fits, fails):
+    """The boundaries of each integer type, both sides (the check is a range test, then a
+    whole-number test through a conversion that is defined only inside the range)."""
+    template = bytes(40)
+    for value in fits:
+        out = bytearray(40)
+        assert ccodec.records_into(out, 0, template, code.encode(), (31,),
+                                   np.array([5], np.uint64), np.array([value])) == 1
+    for value in fails:
+        with pytest.raises(ValueError, match="row 0, field 0 does not fit"):
+            ccodec.records_into(bytearray(40), 0, template, code.encode(), (31,),
+                                np.array([5], np.uint64), np.array([value]))

@@ -1889,9 +1889,35 @@ PyDoc_STRVAR(records_into_doc,
 
 static void put_le(uint8_t *p, uint64_t v, int bytes)
 {
+#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__
+    /* the host's own order is the record's: one move instead of a loop of shifts */
+    if (bytes == 8) {
+        memcpy(p, &v, 8);
+        return;
+    }
+    if (bytes == 4) {
+        uint32_t w = (uint32_t)v;
+        memcpy(p, &w, 4);
+        return;
+    }
+#endif
     for (int i = 0; i < bytes; i++) {
         p[i] = (uint8_t)(v >> (8 * i));
     }
+}
+
+/* v is a whole number in [lo, hi] (NaN fails every comparison). The conversion to int64_t is
+   defined only inside that type's range, so a whole-number test through it comes after the
+   range test; 'Q' above 2^63 goes through uint64_t. floor() would be a libm call a value. */
+static int whole_in(double v, double lo, double hi, int unsigned64)
+{
+    if (!(v >= lo && v <= hi)) {
+        return 0;
+    }
+    if (unsigned64) {
+        return (double)(uint64_t)v == v;
+    }
+    return (double)(int64_t)v == v;
 }
 
 static int fits(double v, char code)
@@ -1902,13 +1928,15 @@ static int fits(double v, char code)
     case 'f':
         return !isfinite(v) || fabs(v) <= (double)FLT_MAX;
     case 'I':
-        return v == floor(v) && v >= 0.0 && v <= 4294967295.0;
+        return whole_in(v, 0.0, 4294967295.0, 0);
     case 'i':
-        return v == floor(v) && v >= -2147483648.0 && v <= 2147483647.0;
+        return whole_in(v, -2147483648.0, 2147483647.0, 0);
     case 'Q':
-        return v == floor(v) && v >= 0.0 && v < 18446744073709551616.0;
+        /* the largest double below 2^64 */
+        return whole_in(v, 0.0, 18446744073709549568.0, 1);
     case 'q':
-        return v == floor(v) && v >= -9223372036854775808.0 && v < 9223372036854775808.0;
+        /* -2^63 to the largest double below 2^63 */
+        return whole_in(v, -9223372036854775808.0, 9223372036854774784.0, 0);
     default:
         return 0;
     }
@@ -1974,8 +2002,16 @@ static PyObject *mod_records_into(PyObject *self, PyObject *const *args, Py_ssiz
         goto done;
     }
     const double *v = (const double *)values.buf;
-    for (Py_ssize_t r = 0; r < n; r++) {
-        for (Py_ssize_t i = 0; i < width; i++) {
+    /* every double fits a 'd' field: only the others are checked */
+    Py_ssize_t checked[64], n_checked = 0;
+    for (Py_ssize_t i = 0; i < width; i++) {
+        if (code[i] != 'd') {
+            checked[n_checked++] = i;
+        }
+    }
+    for (Py_ssize_t r = 0; r < n && n_checked; r++) {
+        for (Py_ssize_t j = 0; j < n_checked; j++) {
+            Py_ssize_t i = checked[j];
             if (!fits(v[r * width + i], code[i])) {
                 PyErr_Format(PyExc_ValueError, "records_into: row %zd, field %zd does not fit its type", r, i);
                 goto done;
