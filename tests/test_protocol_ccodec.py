@@ -91,6 +91,29 @@ def test_crc_check_value(cc):
     assert cc.crc16(bytearray(b"\x01\x03\x08\x05")) == crc_bitwise(b"\x01\x03\x08\x05")
 
 
+def test_crc_four_bytes_a_step_equals_bit_by_bit_for_every_length_and_table_entry(cc):
+    """hil_crc16 takes four bytes a step through four tables, then the tail one at a time:
+    every length 0-40 (each tail, several steps), and data that sends every byte value through
+    each of the four table positions, against the bit-by-bit definition."""
+    rng = random.Random(16)
+    data = bytes(rng.randrange(256) for _ in range(40))
+    for n in range(41):
+        assert cc.crc16(data[:n]) == crc_bitwise(data[:n]), n
+    for value in range(256):
+        for at in range(4):
+            block = bytearray(rng.randrange(256) for _ in range(9))
+            block[at] = value
+            assert cc.crc16(bytes(block)) == crc_bitwise(bytes(block)), (value, at)
+
+
+def test_the_crc_tables_in_hil_proto_c_are_the_generators():
+    import runpy
+
+    gen = runpy.run_path(str(Path(__file__).resolve().parent.parent / "protocol" / "c" / "crc_tables.py"))
+    source = (Path(__file__).resolve().parent.parent / "protocol" / "c" / "hil_proto.c").read_text()
+    assert "\n".join(gen["c_lines"]()) in source
+
+
 def test_gates_frame_by_hand(cc):
     expected = frame_by_hand(bytes([1, 3, 8, 5]), struct.pack("<I", 123_456) + bytes([0x29]))
     assert cc.encode_frame(Gates(123_456, 0x29), 8) == expected

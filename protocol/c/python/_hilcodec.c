@@ -1344,14 +1344,10 @@ static int stage_seal_if_full(stage_t *st)
     return 0;
 }
 
-/* v as a double into *d; -1 with TypeError naming row r and the field (a message's class and
- * field name, or the tuple's index i) otherwise. */
-static int value_of(PyObject *v, double *d, Py_ssize_t r, const msg_class *mc, const char *field, Py_ssize_t i)
+/* value_of for what is not a float: an int or a float subclass, or the TypeError. */
+static int value_of_other(PyObject *v, double *d, Py_ssize_t r, const msg_class *mc, const char *field,
+                          Py_ssize_t i)
 {
-    if (v != NULL && PyFloat_CheckExact(v)) {
-        *d = PyFloat_AS_DOUBLE(v);
-        return 0;
-    }
     if (v != NULL && (PyFloat_Check(v) || PyLong_Check(v))) {
         *d = PyFloat_AsDouble(v);
         return (*d == -1.0 && PyErr_Occurred()) ? -1 : 0;
@@ -1364,6 +1360,18 @@ static int value_of(PyObject *v, double *d, Py_ssize_t r, const msg_class *mc, c
         PyErr_Format(PyExc_TypeError, "recorder: row %zd, value %zd is %s, not a number", r, i, kind);
     }
     return -1;
+}
+
+/* v as a double into *d; -1 with TypeError naming row r and the field (a message's class and
+ * field name, or the tuple's index i) otherwise. Inline: some forty values a period are floats. */
+static inline int value_of(PyObject *v, double *d, Py_ssize_t r, const msg_class *mc, const char *field,
+                           Py_ssize_t i)
+{
+    if (v != NULL && PyFloat_CheckExact(v)) {
+        *d = PyFloat_AS_DOUBLE(v);
+        return 0;
+    }
+    return value_of_other(v, d, r, mc, field, i);
 }
 
 /* A period's rows, what Recorder.period writes: k and the sample's five fields (sensors), the truth
