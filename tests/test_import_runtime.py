@@ -8,6 +8,7 @@ run outside the repository so nothing is picked up from the working directory.
 """
 from __future__ import annotations
 
+import os
 import shutil
 import subprocess
 import venv
@@ -21,6 +22,11 @@ PACKAGES = ("configfile", "plant_rt", "protocol", "hil", "bench")
 # Modules that only their host program loads, and that host: pytest loads the plugin through
 # its entry point, so the plugin may need pytest and nothing else the runtime set lacks.
 HOSTED = {"hil.run.pytest_plugin": "pytest"}
+
+# The venv's own interpreter with nothing of the caller's search path: a PYTHONPATH naming the
+# working tree (a developer's shell) would make the imports below find the sources, not the
+# installed copy.
+CLEAN_ENV = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHONHOME", "PYTHONSTARTUP")}
 
 IMPORT_ALL = """
 import importlib, pkgutil, sys
@@ -55,7 +61,7 @@ def runtime_venv(tmp_path_factory) -> Path:
     python = root / "bin" / "python"
     pip = [str(python), "-m", "pip", "install", "-q", "--disable-pip-version-check"]
     subprocess.run(pip + ["--require-hashes", "-r", str(REPO / "requirements-runtime.lock")],
-                   check=True, timeout=600)
+                   check=True, timeout=600, env=CLEAN_ENV)
     # a copy of the sources: a build in the working tree would leave build/ and *.egg-info there
     source = tmp_path_factory.mktemp("source")
     for name in ("pyproject.toml", "README.md"):
@@ -63,14 +69,14 @@ def runtime_venv(tmp_path_factory) -> Path:
     for pkg in PACKAGES:
         shutil.copytree(REPO / pkg, source / pkg,
                         ignore=shutil.ignore_patterns("__pycache__", "build", "*.so", "*.o"))
-    subprocess.run(pip + ["--no-deps", str(source)], check=True, timeout=600, cwd=root)
+    subprocess.run(pip + ["--no-deps", str(source)], check=True, timeout=600, cwd=root, env=CLEAN_ENV)
     return python
 
 
 def test_every_module_imports_with_the_runtime_dependencies_only(runtime_venv, tmp_path):
     hosted = [f"{module}={host}" for module, host in HOSTED.items()]
     proc = subprocess.run([str(runtime_venv), "-c", IMPORT_ALL, *PACKAGES, *hosted], cwd=tmp_path,
-                          capture_output=True, text=True, timeout=300)
+                          capture_output=True, text=True, timeout=300, env=CLEAN_ENV)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert int(proc.stdout.split()[0]) > 50
 
@@ -79,5 +85,5 @@ def test_the_runtime_venv_lacks_the_test_extras(runtime_venv, tmp_path):
     """The check above means something only if the test packages are really absent."""
     for name in ("pytest", "scipy", "hypothesis"):
         proc = subprocess.run([str(runtime_venv), "-c", f"import {name}"], cwd=tmp_path,
-                              capture_output=True, text=True, timeout=60)
+                              capture_output=True, text=True, timeout=60, env=CLEAN_ENV)
         assert proc.returncode != 0, f"{name} is installed in the runtime-only venv"
