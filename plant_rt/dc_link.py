@@ -12,7 +12,7 @@ a source resistance (an ideal diode into an ideal source is a hybrid constraint,
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from configfile.dataclass_methods import dataclass
 
 from configfile.fields import param
 

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import math
 import operator
-from dataclasses import dataclass
+from configfile.dataclass_methods import dataclass
 
 from configfile.fields import param
 

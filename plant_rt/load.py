@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import bisect
 import math
-from dataclasses import dataclass
+from configfile.dataclass_methods import dataclass
 from typing import Callable, Iterable
 
 from configfile.fields import param

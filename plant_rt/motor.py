@@ -17,7 +17,7 @@ Clarke transform as eq. (7): i_alpha = i_a, i_beta = (i_a + 2 i_b)/sqrt(3).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from configfile.dataclass_methods import dataclass
 import math
 from math import cos, sin
 

@@ -14,10 +14,11 @@ from __future__ import annotations
 import copy
 import re
 import dataclasses
-from dataclasses import dataclass, field
+from dataclasses import field
 from pathlib import Path
 from typing import Any, Callable
 
+from configfile.dataclass_methods import dataclass
 from configfile.schema import SchemaChecker, dataclass_schema, nullable, obj
 from configfile.source import ConfigError, YamlDocument, format_key, load_yaml
 

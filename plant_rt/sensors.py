@@ -24,11 +24,12 @@ from __future__ import annotations
 
 import math
 import random
-from dataclasses import dataclass, field
+from dataclasses import field
 from typing import NamedTuple
 
 import numpy as np
 
+from configfile.dataclass_methods import dataclass
 from configfile.fields import param
 
 STATUS_INDEX_PULSE = 0x01

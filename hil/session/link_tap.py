@@ -31,7 +31,7 @@ import random
 import time
 from array import array
 from collections import deque
-from dataclasses import dataclass
+from configfile.dataclass_methods import dataclass
 
 from protocol import codec_impl
 
