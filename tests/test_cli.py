@@ -129,3 +129,27 @@ def test_a_command_line_builds_only_its_command_s_parser_with_the_same_arguments
         assert alone[command].format_help() == full[command].format_help()
     args = hil_cli._parser(["run", "p.yaml", "--seed", "3"]).parse_args(["run", "p.yaml", "--seed", "3"])
     assert args.command == "run" and args.seed == 3 and args.plans == [Path("p.yaml")]
+
+
+@pytest.mark.parametrize("columns", [None, "57", "200", "0", "wide"])
+def test_the_help_is_as_wide_as_argparse_makes_it_and_reads_the_same(columns, monkeypatch):
+    """hil's help formatter finds the width as shutil.get_terminal_size does ($COLUMNS, else the
+    terminal, else 80) without importing shutil; every command's help is the standard
+    formatter's, word for word, at each width."""
+    import argparse
+    import shutil
+    import sys as _sys
+
+    hil_cli = _sys.modules["hil.cli.main"]
+    if columns is None:
+        monkeypatch.delenv("COLUMNS", raising=False)
+    else:
+        monkeypatch.setenv("COLUMNS", columns)
+    assert hil_cli._terminal_columns() == shutil.get_terminal_size().columns
+    ours, lean = hil_cli._parser(["--help", "init"]), hil_cli._ArgumentParser
+    monkeypatch.setattr(hil_cli, "_ArgumentParser", argparse.ArgumentParser)
+    standard = hil_cli._parser(["--help", "init"])
+    assert ours.format_help() == standard.format_help()
+    for (name, parser), (_, twin) in zip(_subparsers(ours).items(), _subparsers(standard).items()):
+        assert type(parser) is lean and type(twin) is argparse.ArgumentParser
+        assert parser.format_help() == twin.format_help(), name
