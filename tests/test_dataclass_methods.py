@@ -21,7 +21,8 @@ MODULES = ("hil.plans.checks", "hil.plans.format", "hil.plans.limits", "hil.plan
            "hil.plans.signals", "hil.plans.units", "hil.session.policy", "protocol.messages",
            "configfile.source", "hil.faults.injector", "hil.links.registry", "hil.run.console",
            "hil.run.runner", "plant_rt.dc_link", "plant_rt.inverter", "plant_rt.load",
-           "plant_rt.motor", "plant_rt.sensors", "plant_rt.profile", "hil.session.link_tap")
+           "plant_rt.motor", "plant_rt.sensors", "plant_rt.profile", "hil.session.link_tap",
+           "hil.session.bench_session")
 
 
 def _pair(namespace: dict, bases: tuple = (), **kwargs):

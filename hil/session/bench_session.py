@@ -18,10 +18,11 @@ import math
 import struct
 import sys
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import field, replace
 from pathlib import Path
 from typing import Any, Callable
 
+from configfile.dataclass_methods import dataclass
 from plant_rt import Plant, TRUTH_FIELDS
 from protocol.messages import (
     PROTOCOL_VERSION, Command, Fault, FaultCode, Gates, Duty, Hello, ParamGet, ParamId, ParamSet,
@@ -48,6 +49,8 @@ _TRUTH_INDEX = {name: i for i, name in enumerate(TRUTH_FIELDS)}
 
 @dataclass
 class SessionConfig:
+    """How a session is opened: the link, the clock, the log, and overrides of the policy."""
+
     link: str = "stub"
     mode: str = "lockstep"                  # lockstep | realtime
     log_path: Path | None = None
