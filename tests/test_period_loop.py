@@ -417,3 +417,44 @@ def test_a_line_closed_by_the_board_is_a_link_error_after_the_record():
     done, state, (code, what) = rig.run(3)
     assert (done, state, what) == (0, 4, "write failed") and code == errno.EPIPE
     rig.bench_end.close()
+
+
+# ------------------------------------------------------------------ other threads
+
+def test_the_board_runs_without_the_gil_so_other_threads_get_the_interpreter_every_period():
+    """The Modbus port in thread mode and the live server are threads of the bench: while the
+    C loop runs an in-process board, they must get the interpreter every period (the board's
+    call releases it, as a ctypes call does), not once per switch interval. With the switch
+    interval at 10 s, a thread that yields 200 times can finish during a run of periods only if
+    the loop lets it in between: without the release it would wait the full interval for each
+    turn and the run would end first."""
+    import sys
+    import threading
+    import time
+
+    from hil.session import BenchSession, SessionConfig
+    from hil.session.board_params import load_bench_profile
+
+    turns = []
+    stop = threading.Event()
+
+    def other_thread():
+        while not stop.is_set() and len(turns) < 200:
+            time.sleep(0)                  # gives the interpreter up; wants it back at once
+            turns.append(1)
+
+    with BenchSession(load_bench_profile(), SessionConfig(link="stub", seed=3)) as s:
+        s.send_command(enable=True, speed_source="encoder", speed_ref_rpm=1500)
+        s.run_periods(200)
+        old = sys.getswitchinterval()
+        sys.setswitchinterval(10.0)
+        worker = threading.Thread(target=other_thread)
+        try:
+            worker.start()
+            s.run_periods(4000)
+            done_during_run = len(turns)
+        finally:
+            sys.setswitchinterval(old)
+            stop.set()
+            worker.join(30)
+    assert done_during_run == 200

@@ -1089,7 +1089,14 @@ static int exchange_frames(const char *who, fw_exchange_fn exchange, void *fw, E
     uint8_t tx[EXCHANGE_TX_CAP];
     size_t frames_in = 0, bytes_in = 0;
     int rc = 0;
-    size_t n = exchange(fw, frame, (size_t)n_frame, tx, sizeof tx);
+    size_t n;
+    /* The board runs without the GIL, as a ctypes call would: the bench's other threads (the
+     * Modbus port in thread mode, the live server) get the interpreter every period instead of
+     * once per switch interval (5 ms), which made a Modbus request take tens of ms. The call
+     * touches only the frames on this stack and the board's own instance. */
+    Py_BEGIN_ALLOW_THREADS
+    n = exchange(fw, frame, (size_t)n_frame, tx, sizeof tx);
+    Py_END_ALLOW_THREADS
     while (n > 0u) {
         frames_in += count_delimiters(tx, n);
         bytes_in += n;
@@ -1102,7 +1109,9 @@ static int exchange_frames(const char *who, fw_exchange_fn exchange, void *fw, E
         if (n < sizeof tx) {
             break;
         }
+        Py_BEGIN_ALLOW_THREADS
         n = exchange(fw, NULL, 0u, tx, sizeof tx);   /* drain what did not fit */
+        Py_END_ALLOW_THREADS
     }
     counts[0] += 1;
     counts[1] += (int64_t)frames_in;
