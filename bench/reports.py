@@ -1,7 +1,8 @@
 """What a plan's HTML report costs (issue 18's start-up aim): importing the figure code in a
 fresh interpreter (the SVG module the reports use against matplotlib's Figure + Agg canvas,
-which they used before), and writing the reports of the steady-state plan (9 checks, 4
-figures, ~10,500 samples a signal) from a finished run. Medians of `runs` each.
+which they used before), and writing the reports of the steady-state plan (9 checks with a
+figure each and 4 plots: the 13 figures the output counts, ~10,500 samples a signal) from a
+finished run. Medians of `runs` each.
 """
 from __future__ import annotations
 
