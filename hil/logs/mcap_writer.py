@@ -781,5 +781,5 @@ class McapLog:
         summary_offset_start = summary_start + size
         summary = b"".join(parts + offsets)
         footer_head = struct.pack("<BQQQ", rec.FOOTER, 20, summary_start, summary_offset_start)
-        summary_crc = zlib.crc32(footer_head, zlib.crc32(summary))
+        summary_crc = crc32(footer_head, crc32(summary))
         self._write(summary + footer_head + struct.pack("<I", summary_crc) + rec.MAGIC)
