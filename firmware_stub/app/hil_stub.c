@@ -295,8 +295,15 @@ size_t hil_stub_exchange(void *inst, const uint8_t *rx, size_t rx_len, uint8_t *
     hil_stub *s = (hil_stub *)inst;
     s->transport = TRANSPORT_BYTES;
     hil_msg in;
-    for (size_t i = 0; i < rx_len; ++i) {
-        if (hil_decoder_feed(&s->dec, rx[i], &in)) {
+    size_t i = 0;
+    while (i < rx_len) {
+        /* up to and with the next delimiter: a frame at a time, so a HELLO answering a frame of
+         * another version goes out where that frame ended, as fed byte by byte */
+        const uint8_t *delimiter = memchr(rx + i, 0, rx_len - i);
+        size_t end = delimiter != NULL ? (size_t)(delimiter - rx) + 1u : rx_len;
+        int got;
+        i += hil_decoder_feed_buf(&s->dec, rx + i, end - i, &in, &got);
+        if (got) {
             dispatch(s, &in);
         }
         if (s->dec.version_errors != s->version_errors_seen) {

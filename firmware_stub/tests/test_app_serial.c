@@ -28,26 +28,14 @@ static void hello_answered_with_build_name(void **state)
     bench_close(&b);
 }
 
-static void other_version_gets_hello_and_nothing_else(void **state)
+/* A HEARTBEAT frame of header version 2, CRC and COBS by hand (the codec encodes version 1
+ * only): into wire (16 bytes), leading and trailing delimiter; returns its length. */
+static size_t other_version_frame(uint8_t *wire)
 {
-    (void)state;
-    bench b;
-    bench_open(&b);
-    hil_msg h = msg_hello();
-    h.u.hello.proto_version = 2;
-    bench_send(&b, &h);
-    assert_int_equal(bench_count(&b, HIL_MSG_HELLO), 1);
-    hil_msg s = msg_sample(0, 0, 0, 0);
-    bench_send(&b, &s);
-    assert_int_equal(b.n_replies, 1); /* no GATES */
-    /* a frame with another header version: counted, answered with our HELLO */
     uint8_t raw[] = {2, HIL_MSG_HEARTBEAT, 0, 4, 1, 0, 0, 0, 0, 0};
     uint16_t crc = hil_crc16(raw, 8);
     raw[8] = (uint8_t)crc;
     raw[9] = (uint8_t)(crc >> 8);
-    /* COBS by hand: no zeros in raw but the counter bytes: encode via a v1
-     * frame's structure is not possible, so build it: */
-    uint8_t wire[16];
     size_t w = 0, code_at = 0;
     wire[w++] = 0;
     uint8_t code = 1;
@@ -63,8 +51,46 @@ static void other_version_gets_hello_and_nothing_else(void **state)
     }
     wire[code_at] = code;
     wire[w++] = 0;
+    return w;
+}
+
+static void other_version_gets_hello_and_nothing_else(void **state)
+{
+    (void)state;
+    bench b;
+    bench_open(&b);
+    hil_msg h = msg_hello();
+    h.u.hello.proto_version = 2;
+    bench_send(&b, &h);
+    assert_int_equal(bench_count(&b, HIL_MSG_HELLO), 1);
+    hil_msg s = msg_sample(0, 0, 0, 0);
+    bench_send(&b, &s);
+    assert_int_equal(b.n_replies, 1); /* no GATES */
+    /* a frame with another header version: counted, answered with our HELLO */
+    uint8_t wire[16];
+    size_t w = other_version_frame(wire);
     bench_send_bytes(&b, wire, w);
     assert_int_equal(bench_count(&b, HIL_MSG_HELLO), 2);
+    bench_close(&b);
+}
+
+/* Frames in one buffer are answered in their order: each frame of another version gets its
+ * HELLO where it ended, before what the frames after it are answered with. */
+static void answers_in_frame_order_within_one_buffer(void **state)
+{
+    (void)state;
+    bench b;
+    bench_open(&b);
+    uint8_t buf[64];
+    size_t n = other_version_frame(buf);
+    hil_msg get = msg_param(HIL_MSG_PARAM_GET, HIL_PARAM_TORQUE_LIMIT_NM, 0.0f);
+    n += bench_encode(&b, &get, buf + n, sizeof buf - n);
+    n += other_version_frame(buf + n);
+    bench_send_bytes(&b, buf, n);
+    assert_int_equal(b.n_replies, 3);
+    assert_int_equal(b.replies[0].type, HIL_MSG_HELLO);
+    assert_int_equal(b.replies[1].type, HIL_MSG_PARAM_VALUE);
+    assert_int_equal(b.replies[2].type, HIL_MSG_HELLO);
     bench_close(&b);
 }
 
@@ -358,6 +384,7 @@ int main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(hello_answered_with_build_name),
         cmocka_unit_test(other_version_gets_hello_and_nothing_else),
+        cmocka_unit_test(answers_in_frame_order_within_one_buffer),
         cmocka_unit_test(parameter_round_trip_and_statuses),
         cmocka_unit_test(samples_answered_with_gates_and_telemetry),
         cmocka_unit_test(resent_sample_gets_the_same_answer_without_a_second_step),
