@@ -186,6 +186,36 @@ def plan05_rs_id() -> dict:
             "second_model_with_cold_r": {k: v["rotor_position_error_deg"] for k, v in cold.items()}}
 
 
+def q_axis_pull(rpm: float = 1500, vdc_v: float = 70.0, flux_ref_wb: float = 0.099,
+                load_nm: float = 1.0) -> dict:
+    """The drift compensation's pull on the scaled rotor flux, turned along q (the finding of
+    plan 05's first hardware run; docs/fidelity.md and docs/stub.md quote it), linearised, at
+    plan 05's point: with the board's cold R (the first run, i_d of the second derivation with
+    that R) and with the identified R. Two forms: the scale's pull alone,
+    2 w0 e_v psi_d / w_e (psi_d = psi_f + L i_d), and with the current reading's gain,
+    2 w0 (e_v psi_f + (e_v - (g - 1)) L i_d) / w_e; beside them the second derivation's y
+    solved without linearising (which also holds the drop term and the resistance error's own
+    part with the cold R), and the angle the linearised pull turns the rotor flux by,
+    atan(pull / psi_f)."""
+    w_e = rpm / 60 * 2 * math.pi * POLE_PAIRS
+    out = {}
+    for name, r_board in (("cold_r_first_run", R_BOARD_OHM), ("r_identified", r_identified())):
+        p = operating_point_2(rpm, vdc_v, flux_ref_wb, load_nm=load_nm, r_board_ohm=r_board)
+        e_v, i_d = p["e_v"], p["i_d_a"]
+        psi_d = PSI_F_WB + L_H * i_d
+        scale_only = 2 * DRIFT_W0 * e_v * psi_d / w_e
+        with_gain = 2 * DRIFT_W0 * (e_v * PSI_F_WB + (e_v - (CURRENT_GAIN - 1)) * L_H * i_d) / w_e
+        out[name] = {"r_board_ohm": round(r_board, 4), "i_d_a": round(i_d, 3),
+                     "psi_d_mwb": round(psi_d * 1e3, 2),
+                     "pull_scale_only_mwb": round(scale_only * 1e3, 3),
+                     "pull_with_gain_mwb": round(with_gain * 1e3, 3),
+                     "y_second_derivation_mwb": round(p["y_mwb"], 3),
+                     "angle_scale_only_deg": round(math.degrees(math.atan2(scale_only, PSI_F_WB)), 2),
+                     "angle_with_gain_deg": round(math.degrees(math.atan2(with_gain, PSI_F_WB)), 2),
+                     "rotor_position_error_deg": round(p["rotor_position_error_deg"], 2)}
+    return out
+
+
 def ramp_drift(rpm_a: float, rpm_b: float, torque_limit_nm: float = 2.0) -> dict:
     """On the torque-limited ramp: how fast the estimated flux angle drifts against the rotor,
     d(theta_hat - theta_r)/dw, and the speed-estimate bias and extra lag it gives."""
@@ -207,6 +237,8 @@ def run(quick: bool = False) -> dict:
         "plan05_1500rpm_1Nm": operating_point(1500, 70.0, 0.099, load_nm=1.0),
         "plan06_sag_3000rpm_0.5Nm_56V": operating_point(3000, 56.0, 0.0928, load_nm=0.5),
         "plan05_second_derivation_rs_id": plan05_rs_id(),
+        # The q-axis error the drift compensation's pull leaves (docs/fidelity.md, docs/stub.md).
+        "plan05_q_axis_pull": q_axis_pull(),
         # Plans 02 and 06's hardware limits were derived (above) for the board's cold R; since
         # the stub identifies R at start-up on paper-hardware (0254632) they run with R_id.
         # What the second model says of them then, printed AFTER they had run with it (their
