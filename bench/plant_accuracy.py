@@ -6,7 +6,8 @@ DC-link energy error as a fraction of the energy exchanged, current zero crossin
     python -m bench plant_accuracy --quick    # the four short cases only
 
 `solve_ivp_rotor_frame` adds the gate-word path against solve_ivp of the rotor-frame equations
-(tests/test_plant_accuracy.py's reference, imported from there; about 40 s, quick about 8 s).
+(bench/_rotor_frame_reference.py, which tests/test_plant_accuracy.py asserts limits on;
+about 40 s, quick about 8 s).
 
 The reference and the comparison are bench/_switched_reference.py's (scipy solve_ivp,
 rtol 1e-10, on the circuit written from its equations, not from the plant's code); the tests
@@ -41,22 +42,17 @@ def run(quick: bool = False) -> dict:
 
 def solve_ivp_figures(quick: bool = False) -> dict:
     """The gate-word path against solve_ivp (DOP853, rtol 1e-10) of the rotor-frame current
-    equations: tests/test_plant_accuracy.py's three cases, run by its own reference function
-    (the test asserts the limits, 1e-5 of the peak and 1e-6; this prints the values that
-    docs/plant.md quotes). Full: 1 s of random gates sweeping 0.3x to 2x rated speed, Ld != Lq
+    equations: bench/_rotor_frame_reference.py's three cases (tests/test_plant_accuracy.py
+    asserts the limits, 1e-5 of the peak and 1e-6; this prints the values that docs/plant.md
+    quotes). Full: 1 s of random gates sweeping 0.3x to 2x rated speed, Ld != Lq
     at 2x rated (0.15 s), 4 pole pairs (0.1 s); quick: the last two only."""
-    from tests.test_plant_accuracy import RATED_RAD_S as RATED, run_against_reference
+    from bench._rotor_frame_reference import CASES, run_against_reference
 
-    cases = {
-        "ld_ne_lq_twice_rated": ({"motor": {"inductance_d_h": 3.0e-3, "inductance_q_h": 7.0e-3},
-                                  "initial": {"theta_m_rad": 0.3}}, 0.15, 2.0 * RATED, 2.0 * RATED, 5, 0.5),
-        "four_pole_pairs": ({"motor": {"pole_pairs": 4}}, 0.1, 0.4 * RATED, 0.5 * RATED, 7, 0.5),
-    }
-    if not quick:
-        cases = {"random_gates_1s_0.3x_to_2x_rated": ({}, 1.0, 0.3 * RATED, 2.05 * RATED, 3, 0.4), **cases}
+    quick_cases = ("ld_ne_lq_twice_rated", "four_pole_pairs")
+    cases = {name: args for name, args in CASES.items() if not quick or name in quick_cases}
     out = {}
     for name, (overrides, duration, w0, w1, seed, share) in cases.items():
-        r = run_against_reference(overrides, duration, w0, w1, seed=seed, random_share=share)
+        r = run_against_reference(overrides, duration, w0, w1, seed, share)
         out[name] = {"current_error_of_peak": float(f"{r['current_rel']:.2g}"),
                      "speed_error_relative": float(f"{r['speed_rel']:.2g}"),
                      "angle_error_rad": float(f"{r['angle_rad']:.2g}"),
