@@ -17,12 +17,13 @@ SEED = 11
 CHUNK_S = 1.0
 
 
-class _StubCounters(ctypes.Structure):       # hil_stub_get_counters' struct (as tests/test_faults_link.py)
+class _StubCounters(ctypes.Structure):       # hil_stub_get_counters' struct
     _fields_ = [("frames_in", ctypes.c_uint32), ("ignored", ctypes.c_uint32),
                 ("tx_overflows", ctypes.c_uint32), ("decode_errors", ctypes.c_uint32)]
 
 
-def _board(session) -> _StubCounters:
+def stub_counters(session) -> _StubCounters:
+    """The board side's decoder counters (the in-process stub's hil_stub_get_counters)."""
     link = session.tap.link
     out = _StubCounters()
     link._lib.hil_stub_get_counters.argtypes = [ctypes.c_void_p, ctypes.POINTER(_StubCounters)]
@@ -30,33 +31,41 @@ def _board(session) -> _StubCounters:
     return out
 
 
-def run(quick: bool = False) -> dict:
+def soak(soak_s: float, log_path=None, check=None) -> dict:
+    """The soak: 4000 periods at 1500 rpm, then ``soak_s`` simulated seconds with the faults,
+    the in-memory record emptied every CHUNK_S (the log, if any, keeps everything). ``check``
+    (session, periods, board counters before, bench decoder counters before, TELEMETRY rows,
+    periods without GATES) runs before the session closes: tests/test_soak.py's reconciliation.
+    Returns the counters."""
     import numpy as np
 
     from hil.faults.injector import injector
     from hil.session.bench_session import BenchSession, SessionConfig
     from plant_rt import load_profile
 
-    soak_s = 5.0 if quick else 60.0
     T = load_profile().control_period_s
     per_chunk = round(CHUNK_S / T)
     chunks = round(soak_s / CHUNK_S)
     telemetry = 0
     speed_min, speed_max = np.inf, -np.inf
     wall0 = time.perf_counter()
-    with BenchSession(load_profile(), SessionConfig(link="stub", seed=SEED, answer_resends=0)) as session:
+    config = SessionConfig(link="stub", log_path=log_path, seed=SEED, answer_resends=0)
+    with BenchSession(load_profile(), config) as session:
         session.send_command(enable=True, speed_source="encoder", speed_ref_rpm=1500)
-        session.run_periods(4000)
+        session.run_periods(4000)                    # at speed before the faults
         session.drain()
-        board0, bench0 = _board(session), dict(session.tap._decoder.counters)
+        board0, bench0 = stub_counters(session), dict(session.tap._decoder.counters)
         missed0 = session.missed_answers
         inj = injector(session)
         inj.inject("link_drop", rate=0.01, seed=1)
         inj.inject("link_corrupt", rate=0.01, seed=2)
         rec = session.recorder
-        rec.clear()
+        rec.clear()                                  # memory stays bounded; the log keeps all
         for chunk in range(chunks):
-            session.run_periods(per_chunk)
+            ran = session.run_periods(per_chunk)
+            if ran != per_chunk or session.error is not None:
+                raise RuntimeError(f"soak: chunk {chunk} ran {ran} of {per_chunk} periods "
+                                   f"({session.error})")
             if chunk == chunks - 1:
                 session.drain()
             telemetry += len(rec.telemetry_rows)
@@ -65,9 +74,11 @@ def run(quick: bool = False) -> dict:
             rec.clear()
         inj.clear()
         periods = chunks * per_chunk
-        st = dict(session.tap.stats)
-        board, bench = _board(session), session.tap._decoder.counters
         missed = session.missed_answers - missed0
+        if check is not None:
+            check(session, periods, board0, bench0, telemetry, missed)
+        st = dict(session.tap.stats)
+        board, bench = stub_counters(session), session.tap._decoder.counters
         lost_out = st["out_dropped"] + st["out_corrupted"]
         lost_in = st["in_dropped"] + st["in_corrupted"]
         gates_lost = lost_in - ((periods - lost_out) - telemetry)
@@ -85,8 +96,15 @@ def run(quick: bool = False) -> dict:
             "bench_frames_ok": bench["frames_ok"] - bench0["frames_ok"],
             "stale_answers": session.stale_answers, "board_faults": len(session.faults),
             "speed_min_rpm": round(float(speed_min), 1), "speed_max_rpm": round(float(speed_max), 1),
+            "link_counters": session.link_counters(), "missed_answers_before": missed0,
         }
     wall = time.perf_counter() - wall0
     out["wall_s"] = round(wall, 1)
     out["periods_per_s"] = round((periods + 4000) / wall)
+    return out
+
+
+def run(quick: bool = False) -> dict:
+    out = soak(5.0 if quick else 60.0)
+    del out["link_counters"], out["missed_answers_before"]   # (the test's cross-checks)
     return out

@@ -3,7 +3,6 @@ decoders, and a session survives every link fault (lockstep and real time) or, p
 watchdog, safe-states and ends with ERROR with its log readable."""
 from __future__ import annotations
 
-import ctypes
 import math
 import random
 
@@ -12,6 +11,7 @@ import pytest
 
 from plant_rt import load_profile
 
+from bench.soak import stub_counters
 from hil.faults.injector import LINK_KINDS, injector
 from hil.session.link_tap import LinkFault, LinkTap, _flip_bits
 from hil.logs.reader import read_log
@@ -108,20 +108,6 @@ def test_bad_link_fault_arguments_are_refused():
 
 
 # --------------------------------------------------------------------------- the stub's counters
-class _StubCounters(ctypes.Structure):
-    _fields_ = [("frames_in", ctypes.c_uint32), ("ignored", ctypes.c_uint32),
-                ("tx_overflows", ctypes.c_uint32), ("decode_errors", ctypes.c_uint32)]
-
-
-def stub_counters(session) -> _StubCounters:
-    """The board side's decoder counters (the in-process stub's hil_stub_get_counters)."""
-    link = session.tap.link
-    out = _StubCounters()
-    link._lib.hil_stub_get_counters.argtypes = [ctypes.c_void_p, ctypes.POINTER(_StubCounters)]
-    link._lib.hil_stub_get_counters(link._instance, ctypes.byref(out))
-    return out
-
-
 def reconcile(session, periods: int, before_board, before_bench: dict, telemetry_rows: int,
               missed: int) -> dict:
     """Checks every counter against every other over a stretch of ``periods`` periods under

@@ -12,54 +12,27 @@ import time
 
 import numpy as np
 
-from plant_rt import load_profile
-
-from hil.faults.injector import injector
+from bench.soak import soak
 from hil.logs.reader import log_summary
-from hil.session.bench_session import BenchSession, SessionConfig
-from tests.test_faults_link import reconcile, stub_counters
+from tests.test_faults_link import reconcile
 
-SOAK_S = 60.0
-CHUNK_S = 1.0
+SOAK_S = 60.0    # bench/soak.py's scenario, which `python -m bench soak` prints
 
 
 def test_sixty_second_soak_with_drops_and_corruption(tmp_path):
     log = tmp_path / "soak.mcap"
-    T = load_profile().control_period_s
-    per_chunk = round(CHUNK_S / T)
-    chunks = round(SOAK_S / CHUNK_S)
-    telemetry = 0
-    speed_min = np.inf
-    speed_max = -np.inf
     wall0 = time.monotonic()
-    with BenchSession(load_profile(), SessionConfig(link="stub", log_path=log, seed=11,
-                                                         answer_resends=0)) as session:
-        session.send_command(enable=True, speed_source="encoder", speed_ref_rpm=1500)
-        session.run_periods(4000)                    # at speed before the faults
-        session.drain()
-        board0, bench0 = stub_counters(session), dict(session.tap._decoder.counters)
-        missed0 = session.missed_answers
-        inj = injector(session)
-        inj.inject("link_drop", rate=0.01, seed=1)
-        inj.inject("link_corrupt", rate=0.01, seed=2)
-        rec = session.recorder
-        rec.clear()                                  # memory stays bounded; the log keeps all
-        for chunk in range(chunks):
-            ran = session.run_periods(per_chunk)
-            assert ran == per_chunk and session.error is None
-            if chunk == chunks - 1:
-                session.drain()
-            telemetry += len(rec.telemetry_rows)
-            speed = np.asarray(rec.truth_rows)[:, 11]           # speed_rpm
-            speed_min, speed_max = min(speed_min, speed.min()), max(speed_max, speed.max())
-            rec.clear()
-        inj.clear()
-        periods = chunks * per_chunk
-        got = reconcile(session, periods, board0, bench0, telemetry,
-                        session.missed_answers - missed0)
+    got = {}
+
+    def check(session, periods, board0, bench0, telemetry, missed):
+        got.update(reconcile(session, periods, board0, bench0, telemetry, missed))
         assert not session.faults                    # the board never tripped
-        counters = session.link_counters()
+
+    out = soak(SOAK_S, log, check)
     wall = time.monotonic() - wall0
+    periods, counters, speed_min, speed_max = (out["periods"], out["link_counters"],
+                                               out["speed_min_rpm"], out["speed_max_rpm"])
+    missed0 = out["missed_answers_before"]
     # 1 % each way: out ~ 12,000 dropped and ~ 12,000 corrupted SAMPLEs, in twice as many.
     n = periods
     for key, expected in (("out_dropped", 0.01 * n), ("out_corrupted", 0.01 * 0.99 * n)):
