@@ -7,12 +7,13 @@ from __future__ import annotations
 
 import argparse
 import gc
-import json
 import os
 import sys
 from pathlib import Path
 
-from hil.links.registry import LINK_CHOICES
+# json and hil.links.registry (which brings configfile, yaml, dataclasses, protocol, ctypes) are
+# imported by the functions that use them: `hil` imports this module with the cyclic GC on, and
+# main() turns it off before anything else is imported (see main).
 
 EXIT_PASS, EXIT_FAIL, EXIT_ERROR = 0, 1, 2
 COMMANDS = ("run", "serve", "log", "bench", "plans", "sweep", "init")
@@ -62,6 +63,7 @@ def _parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     # formatter, its arguments). Anything else (hil, hil --help, a misspelt command) builds them
     # all, for the list of commands and the error message.
     only = words[0] if words and words[0] in COMMANDS else None
+    from hil.links.registry import LINK_CHOICES
 
     if only in (None, "run"):
         run = sub.add_parser("run", help="run test plans against a board",
@@ -235,6 +237,8 @@ def _main(argv: list[str] | None, program: bool) -> int:
 
 
 def _log_command(args) -> int:
+    import json
+
     from hil.logs import commands as log_commands
 
     if args.log_command == "info":
