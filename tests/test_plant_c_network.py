@@ -43,7 +43,7 @@ class Counting:
 
     def __init__(self, scale_r: float = 1.0):
         self.calls = {"integrate": 0, "settle": 0, "leg_period": 0, "advance": 0,
-                      "duty_windows": 0, "period": 0}
+                      "duty_windows": 0, "period": 0, "fast_period": 0}
         self.scale_r = scale_r
 
     def _k(self, k):
@@ -66,6 +66,10 @@ class Counting:
     def period(self, k, *args):
         self.calls["period"] += 1
         return ckernel.EXTENSION.period(self._k(k), *args)
+
+    def fast_period(self, k, *args):
+        self.calls["fast_period"] += 1
+        return ckernel.EXTENSION.fast_period(self._k(k), *args)
 
     def advance(self, k, *args):
         self.calls["advance"] += 1
@@ -98,6 +102,14 @@ def compare(overrides: dict, n: int, seed: int, mode: str = "duty", setup=None,
     for _ in range(n):
         if mode == "duty":
             d = (rng.random(), rng.random(), rng.random())
+            c_plant.step(duty=d)
+            py_plant.step(duty=d)
+        elif mode == "small_duty":
+            # balanced duties 0.5 +- 0.03 turning with the rotor at 20 rad/s, a little noise:
+            # sub-ampere currents crossing zero within most periods
+            th = 20.0 * c_plant.period * c_plant.control_period_s
+            d = tuple(0.5 + 0.03 * math.cos(th - 2.0 * math.pi * x / 3.0) + 0.002 * rng.random()
+                      for x in range(3))
             c_plant.step(duty=d)
             py_plant.step(duty=d)
         elif mode == "gates":
@@ -157,8 +169,23 @@ def test_pwm_with_dead_time_through_zero_crossings_from_standstill():
     worst, kernel, ref = compare({"inverter": {"dead_time_s": 1.0e-6},
                                   "initial": {"speed_rad_s": 0.0}}, 1500, seed=2)
     assert worst <= LIMIT
-    assert kernel.calls["integrate"] + kernel.calls["period"] > 0 and ref.network.events > 0
-    assert kernel.calls["advance"] > 0      # driven and diode intervals of the general path
+    # the network, the driven and the diode intervals of the general path (in one call a
+    # period, fast_period, on an ideal link)
+    assert kernel.calls["integrate"] + kernel.calls["period"] + kernel.calls["fast_period"] > 0
+    assert ref.network.events > 0
+    assert kernel.calls["advance"] + kernel.calls["fast_period"] > 0
+
+
+@needs_kernel
+def test_pwm_with_dead_time_near_current_zeros_at_low_speed_c_equals_python():
+    """Small balanced duties at 20 rad/s with 1 us dead time: most periods leave leg_period
+    (a current crosses zero) for the per-interval path, in C fast_period: the fast RK4, the
+    diode-equivalent trial, the network where a diode current reaches zero."""
+    worst, kernel, ref = compare({"inverter": {"dead_time_s": 1.0e-6},
+                                  "initial": {"speed_rad_s": 20.0}}, 1500, seed=3,
+                                 mode="small_duty")
+    assert worst <= LIMIT
+    assert kernel.calls["fast_period"] > 500 and ref.network.events > 100
 
 
 @needs_kernel
@@ -188,7 +215,8 @@ def test_safe_state_coast_at_twice_rated_speed_c_equals_python():
 def test_other_network_paths_c_equal_python(name, overrides, mode, setup):
     worst, kernel, _ = compare(overrides, 1000, seed=4, mode=mode, setup=setup)
     assert worst <= LIMIT, name
-    assert kernel.calls["integrate"] + kernel.calls["period"] > 0, name
+    # (on an ideal link the general path's intervals go through fast_period)
+    assert kernel.calls["integrate"] + kernel.calls["period"] + kernel.calls["fast_period"] > 0, name
 
 
 @needs_kernel

@@ -1117,6 +1117,226 @@ static PyObject *mod_period(PyObject *self, PyObject *const *args, Py_ssize_t na
                          n.kinds[1], n.kinds[2], last, n.events, n.overflows, n.vdc, ran);
 }
 
+/* A driven word's vector as Plant._vectors holds it: (va, vb, ga, gb, legs); 0 none (None), 1 read,
+ * -1 with an exception. */
+static int driven_vector(PyObject *vectors, long word, double v[4], int legs[3])
+{
+    PyObject *vec = PyList_GET_ITEM(vectors, word);
+    if (vec == Py_None) {
+        return 0;
+    }
+    if (!PyTuple_Check(vec) || PyTuple_GET_SIZE(vec) != 5) {
+        PyErr_SetString(PyExc_TypeError, "vectors: (va, vb, ga, gb, legs) or None per word");
+        return -1;
+    }
+    for (int i = 0; i < 4; i++) {
+        if (get_double(PyTuple_GET_ITEM(vec, i), &v[i]) < 0) {
+            return -1;
+        }
+    }
+    return get_kinds(PyTuple_GET_ITEM(vec, 4), legs) < 0 ? -1 : 1;
+}
+
+/* Plant._advance: the fast RK4 over one driven interval of `length`, y and acc updated. */
+static void fast_advance(const cfg_t *m, int spm, double *y, const double v[4], double length,
+                         double h_max, double v0, double slope, double bw, double *acc)
+{
+    double steps = ceil(length / h_max - 1e-9);
+    long n = steps < 1.0 ? 1 : (long)steps;
+    double pa0 = y[0], pb0 = y[1];
+    double st[4] = {y[0], y[1], y[2], y[3]};
+    if (spm) {
+        advance_spm(m, st, v[0], v[1], length / (double)n, n, v0, slope, bw);
+    } else {
+        advance_general(m, st, v[0], v[1], length / (double)n, n, v0, slope, bw);
+    }
+    y[0] = st[0];
+    y[1] = st[1];
+    y[2] = st[2];
+    y[3] = st[3];
+    acc[0] += v[0] * length;
+    acc[1] += v[1] * length;
+    acc[2] += (v[2] * (v[0] * length - (y[0] - pa0)) + v[3] * (v[1] * length - (y[1] - pb0))) / m->r;
+}
+
+PyDoc_STRVAR(fast_period_doc,
+"fast_period(motor_k, spm, cfg, kinds, last_legs, intervals, t0, T, y, h_max, acc, seg_t, seg_v0,\n"
+"            slope, vdc, vectors, bw, net_dirty) -> (y, kinds, last_legs, events, overflows, vdc,\n"
+"            net_dirty)\n\n"
+"Plant._intervals' loop on the fast path (an ideal link, no device drop, no open phase) when no\n"
+"load knot falls in the period, operation by operation: a driven word's interval by the fast\n"
+"RK4 (Plant._advance), an interval with an open leg whose diode conducts throughout as the\n"
+"equivalent driven word (Plant._diode_interval), any other through the network (Network.begin\n"
+"and integrate, as period() does); after a fast interval the network takes the driven legs\n"
+"(Network.set_driven) if an interval through it came since the last time (net_dirty).\n"
+"vectors: Plant._vectors, 64 entries; bw: the motor's and the load's damping.");
+
+static PyObject *mod_fast_period(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    (void)self;
+    if (nargs != 18) {
+        PyErr_SetString(PyExc_TypeError, "fast_period takes 18 arguments");
+        return NULL;
+    }
+    net_t n;
+    memset(&n, 0, sizeof n);
+    double t0, T, y[5], acc[3], h_max, seg_t, seg_v0, slope, bw;
+    int kinds[3];
+    long last_l = PyLong_AsLong(args[4]);
+    if (last_l == -1 && PyErr_Occurred()) {
+        return NULL;
+    }
+    int spm = PyObject_IsTrue(args[1]);
+    int net_dirty = PyObject_IsTrue(args[17]);
+    if (spm < 0 || net_dirty < 0) {
+        return NULL;
+    }
+    if (get_cfg(args[0], args[2], &n.c) < 0 || get_kinds(args[3], kinds) < 0 ||
+        get_double(args[6], &t0) < 0 || get_double(args[7], &T) < 0 ||
+        get_doubles(args[8], y, 5, "y") < 0 || get_double(args[9], &h_max) < 0 ||
+        get_double(args[11], &seg_t) < 0 || get_double(args[12], &seg_v0) < 0 ||
+        get_double(args[13], &slope) < 0 || get_double(args[14], &n.vdc) < 0 ||
+        get_double(args[16], &bw) < 0) {
+        return NULL;
+    }
+    PyObject *intervals = args[5], *acc_list = args[10], *vectors = args[15];
+    if (!PyList_Check(intervals)) {
+        PyErr_SetString(PyExc_TypeError, "intervals must be a list of (a, b, word)");
+        return NULL;
+    }
+    if (!PyList_Check(vectors) || PyList_GET_SIZE(vectors) != 64) {
+        PyErr_SetString(PyExc_TypeError, "vectors must be a list of 64 entries");
+        return NULL;
+    }
+    if (!PyList_Check(acc_list) || get_doubles(acc_list, acc, 3, "acc") < 0) {
+        if (!PyErr_Occurred()) {
+            PyErr_SetString(PyExc_TypeError, "acc must be a list of 3 floats");
+        }
+        return NULL;
+    }
+    if (!(h_max > 0.0) || !(T > 0.0) || !isfinite(t0)) {
+        PyErr_SetString(PyExc_ValueError, "fast_period: need h_max > 0, T > 0, t0 finite");
+        return NULL;
+    }
+    int last = (int)last_l;
+    configure(&n, kinds);
+    Py_ssize_t count = PyList_GET_SIZE(intervals);
+    for (Py_ssize_t i = 0; i < count; i++) {
+        PyObject *iv = PyList_GET_ITEM(intervals, i);
+        if (!PyTuple_Check(iv) || PyTuple_GET_SIZE(iv) != 3) {
+            PyErr_SetString(PyExc_TypeError, "intervals must be a list of (a, b, word)");
+            return NULL;
+        }
+        double a, b;
+        if (get_double(PyTuple_GET_ITEM(iv, 0), &a) < 0 ||
+            get_double(PyTuple_GET_ITEM(iv, 1), &b) < 0) {
+            return NULL;
+        }
+        long word = PyLong_AsLong(PyTuple_GET_ITEM(iv, 2));
+        if (word == -1 && PyErr_Occurred()) {
+            return NULL;
+        }
+        if (word < 0 || word > 63) {
+            PyErr_SetString(PyExc_ValueError, "fast_period: a word is 0..63");
+            return NULL;
+        }
+        if (!(b - a > 1e-15 * T)) {
+            continue;
+        }
+        double ta = t0 + a;
+        double length = b - a;
+        /* _load_segment(t0 + a) inside the segment that holds the whole period */
+        double v0 = seg_v0 + slope * (ta - seg_t);
+        double v[4];
+        int driven[3];
+        int got = driven_vector(vectors, word, v, driven);
+        if (got < 0) {
+            return NULL;
+        }
+        if (got) {
+            fast_advance(&n.c, spm, y, v, length, h_max, v0, slope, bw, acc);
+            if (net_dirty) {
+                configure(&n, driven);      /* Network.set_driven: no open phase here */
+                last = -1;
+                net_dirty = 0;
+            }
+            continue;
+        }
+        int legs[3];
+        for (int x = 0; x < 3; x++) {
+            int on_h = (word & LEG_BITS[x][0]) != 0, on_l = (word & LEG_BITS[x][1]) != 0;
+            legs[x] = on_h && !on_l ? K_H : on_l && !on_h ? K_L : K_O;
+        }
+        /* _diode_interval: every open leg's diode by its current's sign, tried as that word */
+        double ia, ib;
+        currents(&n.c, y[0], y[1], y[3], &ia, &ib);
+        double cur[3] = {ia, -0.5 * ia + S32 * ib, -0.5 * ia - S32 * ib};
+        long equivalent = 0;
+        int diode = 1;
+        for (int x = 0; x < 3 && diode; x++) {
+            int side = legs[x];
+            if (side == K_O) {
+                if (cur[x] > ZERO_CURRENT_A) {
+                    side = K_L;             /* current into the motor: low diode */
+                } else if (cur[x] < -ZERO_CURRENT_A) {
+                    side = K_H;
+                } else {
+                    diode = 0;              /* at zero: the network decides what follows */
+                }
+            }
+            equivalent |= side == K_H ? LEG_BITS[x][0] : LEG_BITS[x][1];
+        }
+        if (diode) {
+            got = driven_vector(vectors, equivalent, v, driven);
+            if (got < 0) {
+                return NULL;
+            }
+            if (!got) {
+                PyErr_SetString(PyExc_ValueError, "fast_period: no vector for a driven word");
+                return NULL;
+            }
+            double trial[5] = {y[0], y[1], y[2], y[3], y[4]};
+            double part[3] = {0.0, 0.0, 0.0};
+            fast_advance(&n.c, spm, trial, v, length, h_max, v0, slope, bw, part);
+            currents(&n.c, trial[0], trial[1], trial[3], &ia, &ib);
+            double after[3] = {ia, -0.5 * ia + S32 * ib, -0.5 * ia - S32 * ib};
+            for (int x = 0; x < 3; x++) {
+                if (legs[x] == K_O && (after[x] > 0.0) != (cur[x] > 0.0)) {
+                    diode = 0;
+                }
+            }
+            if (diode) {
+                memcpy(y, trial, sizeof trial);
+                for (int j = 0; j < 3; j++) {
+                    acc[j] += part[j];
+                }
+                if (net_dirty) {
+                    configure(&n, driven);
+                    last = -1;
+                    net_dirty = 0;
+                }
+                continue;
+            }
+        }
+        n.c.tl_t = ta;
+        n.c.tl_v0 = v0;
+        n.c.tl_slope = slope;
+        begin(&n, ta, y, legs, &last);
+        net_integrate(&n, ta, t0 + b, y, h_max, acc);
+        net_dirty = 1;
+    }
+    for (int i = 0; i < 3; i++) {
+        PyObject *f = PyFloat_FromDouble(acc[i]);
+        if (f == NULL) {
+            return NULL;
+        }
+        PyList_SetItem(acc_list, i, f); /* steals f */
+    }
+    return Py_BuildValue("[ddddd](iii)illdO", y[0], y[1], y[2], y[3], y[4], n.kinds[0],
+                         n.kinds[1], n.kinds[2], last, n.events, n.overflows, n.vdc,
+                         net_dirty ? Py_True : Py_False);
+}
+
 PyDoc_STRVAR(settle_doc,
 "settle(motor_k, cfg, kinds, t, y) -> (y, kinds, events)\n\n"
 "Network.begin's projection and _settle: puts y on the constraint of the floating phases and\n"
@@ -2486,6 +2706,7 @@ static PyMethodDef methods[] = {
     {"leg_period", (PyCFunction)(void (*)(void))mod_leg_period, METH_FASTCALL, leg_period_doc},
     {"advance", (PyCFunction)(void (*)(void))mod_advance, METH_FASTCALL, advance_doc},
     {"period", (PyCFunction)(void (*)(void))mod_period, METH_FASTCALL, period_doc},
+    {"fast_period", (PyCFunction)(void (*)(void))mod_fast_period, METH_FASTCALL, fast_period_doc},
     {"duty_windows", (PyCFunction)(void (*)(void))mod_duty_windows, METH_FASTCALL, duty_windows_doc},
     {"duty_period", (PyCFunction)(void (*)(void))mod_duty_period, METH_FASTCALL, duty_period_doc},
     {"sample", (PyCFunction)(void (*)(void))mod_sample, METH_FASTCALL, sample_doc},
