@@ -173,7 +173,8 @@ class SwitchTimeline:
     interval's word, after dead time, so a stuck-on switch meeting its commanded partner is a
     shoot-through like any other.
 
-    ``kernel``: the plant's C kernel (plant_rt.ckernel), which then computes _duty_windows;
+    ``kernel``: the plant's C kernel (plant_rt.ckernel), which then computes _duty_windows and
+    the word intervals' sweep;
     None (the default) keeps the Python code.
     """
 
@@ -216,6 +217,11 @@ class SwitchTimeline:
 
     def words(self, windows: list[list[tuple[float, float]]]) -> list[tuple[float, float, int]]:
         """The constant-word intervals of switch_windows()' on-intervals (stuck bits applied)."""
+        sweep = getattr(self.kernel, "word_intervals", None)
+        if sweep is not None:
+            intervals = sweep(self.period_s, windows)
+            if intervals is not None:       # (None: more toggles than the kernel holds)
+                return self._stuck(intervals)
         return self._stuck(self._word_intervals(windows))
 
     def switch_windows(self, old: Command, new: Command) -> list[list[tuple[float, float]]]:

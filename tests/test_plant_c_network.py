@@ -43,7 +43,7 @@ class Counting:
 
     def __init__(self, scale_r: float = 1.0):
         self.calls = {"integrate": 0, "settle": 0, "leg_period": 0, "advance": 0,
-                      "duty_windows": 0, "period": 0, "fast_period": 0}
+                      "duty_windows": 0, "period": 0, "fast_period": 0, "word_intervals": 0}
         self.scale_r = scale_r
 
     def _k(self, k):
@@ -70,6 +70,10 @@ class Counting:
     def fast_period(self, k, *args):
         self.calls["fast_period"] += 1
         return ckernel.EXTENSION.fast_period(self._k(k), *args)
+
+    def word_intervals(self, *args):
+        self.calls["word_intervals"] += 1
+        return ckernel.EXTENSION.word_intervals(*args)
 
     def advance(self, k, *args):
         self.calls["advance"] += 1
@@ -186,6 +190,29 @@ def test_pwm_with_dead_time_near_current_zeros_at_low_speed_c_equals_python():
                                  mode="small_duty")
     assert worst <= LIMIT
     assert kernel.calls["fast_period"] > 500 and ref.network.events > 100
+    assert kernel.calls["word_intervals"] > 500
+
+
+@needs_kernel
+def test_the_word_interval_sweep_c_equals_python():
+    """Random on-windows per switch (starting at or before 0, ending at or after T, touching,
+    sharing edges with other switches): the kernel's sweep gives Timeline._word_intervals'
+    intervals exactly; more toggles than it holds: None (the Python sweep runs)."""
+    from plant_rt.inverter import SwitchTimeline
+
+    T = 50e-6
+    timeline = SwitchTimeline(T, 0.0, 0.0)
+    rng = random.Random(7)
+    grid = [i * T / 8 for i in range(9)]        # shared edges, 0 and T among them
+    for _ in range(2000):
+        windows = []
+        for _ in range(6):
+            edges = sorted(rng.sample(grid + [rng.uniform(-T, 2 * T) for _ in range(2)],
+                                      2 * rng.randrange(0, 4)))
+            windows.append([(edges[i], edges[i + 1]) for i in range(0, len(edges), 2)])
+        assert ckernel.EXTENSION.word_intervals(T, windows) == timeline._word_intervals(windows)
+    many = [[(i * 1e-7, i * 1e-7 + 5e-8) for i in range(1, 100)]] + [[] for _ in range(5)]
+    assert ckernel.EXTENSION.word_intervals(T, many) is None
 
 
 @needs_kernel

@@ -1159,6 +1159,122 @@ static void fast_advance(const cfg_t *m, int spm, double *y, const double v[4], 
     acc[2] += (v[2] * (v[0] * length - (y[0] - pa0)) + v[3] * (v[1] * length - (y[1] - pb0))) / m->r;
 }
 
+/* A switch toggling at `when` (word bit `bit`): the sweep's events, in (when, bit) order. */
+typedef struct {
+    double when;
+    int bit;
+} toggle_t;
+
+static int toggle_cmp(const void *pa, const void *pb)
+{
+    const toggle_t *a = pa, *b = pb;
+    if (a->when != b->when) {
+        return a->when < b->when ? -1 : 1;
+    }
+    return (a->bit > b->bit) - (a->bit < b->bit);
+}
+
+#define MAX_TOGGLES (6 * MAX_WIN * 2)
+
+PyDoc_STRVAR(word_intervals_doc,
+"word_intervals(T, windows) -> [(start, end, word), ...] or None\n\n"
+"Timeline._word_intervals: the six switches' on-windows [(a, b), ...] swept into the\n"
+"constant-word intervals covering [0, T), neighbours with the same word joined (stuck bits\n"
+"not applied). None when there are more toggles than it holds (Python's turn).");
+
+static PyObject *mod_word_intervals(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    (void)self;
+    if (nargs != 2) {
+        PyErr_SetString(PyExc_TypeError, "word_intervals takes 2 arguments");
+        return NULL;
+    }
+    double T;
+    if (get_double(args[0], &T) < 0) {
+        return NULL;
+    }
+    PyObject *windows = args[1];
+    if (!PyList_Check(windows) || PyList_GET_SIZE(windows) != 6) {
+        PyErr_SetString(PyExc_TypeError, "windows must be a list of 6 lists of (a, b)");
+        return NULL;
+    }
+    toggle_t toggles[MAX_TOGGLES];
+    int nt = 0;
+    long word = 0;
+    for (int j = 0; j < 6; j++) {
+        PyObject *sw = PyList_GET_ITEM(windows, j);
+        if (!PyList_Check(sw)) {
+            PyErr_SetString(PyExc_TypeError, "windows must be a list of 6 lists of (a, b)");
+            return NULL;
+        }
+        int bit = 1 << j;
+        for (Py_ssize_t i = 0; i < PyList_GET_SIZE(sw); i++) {
+            PyObject *w = PyList_GET_ITEM(sw, i);
+            double a, b;
+            if (!PyTuple_Check(w) || PyTuple_GET_SIZE(w) != 2) {
+                PyErr_SetString(PyExc_TypeError, "a window is (a, b)");
+                return NULL;
+            }
+            if (get_double(PyTuple_GET_ITEM(w, 0), &a) < 0 || get_double(PyTuple_GET_ITEM(w, 1), &b) < 0) {
+                return NULL;
+            }
+            if (nt > MAX_TOGGLES - 2) {
+                Py_RETURN_NONE;
+            }
+            if (a <= 0.0) {
+                word |= bit;
+            } else {
+                toggles[nt].when = a;
+                toggles[nt++].bit = bit;
+            }
+            if (b < T) {
+                toggles[nt].when = b;
+                toggles[nt++].bit = bit;
+            }
+        }
+    }
+    qsort(toggles, (size_t)nt, sizeof toggles[0], toggle_cmp);
+    /* the sweep, joining a new interval to the last one when the word is the same */
+    double start[MAX_TOGGLES + 1], end[MAX_TOGGLES + 1];
+    long words[MAX_TOGGLES + 1];
+    int n = 0;
+    double t = 0.0;
+    for (int i = 0; i < nt; i++) {
+        double when = toggles[i].when;
+        if (when > t) {
+            if (n > 0 && words[n - 1] == word) {
+                end[n - 1] = when;
+            } else {
+                start[n] = t;
+                end[n] = when;
+                words[n++] = word;
+            }
+            t = when;
+        }
+        word ^= toggles[i].bit;
+    }
+    if (n > 0 && words[n - 1] == word) {
+        end[n - 1] = T;
+    } else {
+        start[n] = t;
+        end[n] = T;
+        words[n++] = word;
+    }
+    PyObject *out = PyList_New(n);
+    if (out == NULL) {
+        return NULL;
+    }
+    for (int i = 0; i < n; i++) {
+        PyObject *iv = Py_BuildValue("(ddl)", start[i], end[i], words[i]);
+        if (iv == NULL) {
+            Py_DECREF(out);
+            return NULL;
+        }
+        PyList_SET_ITEM(out, i, iv);
+    }
+    return out;
+}
+
 PyDoc_STRVAR(fast_period_doc,
 "fast_period(motor_k, spm, cfg, kinds, last_legs, intervals, t0, T, y, h_max, acc, seg_t, seg_v0,\n"
 "            slope, vdc, vectors, bw, net_dirty) -> (y, kinds, last_legs, events, overflows, vdc,\n"
@@ -2707,6 +2823,7 @@ static PyMethodDef methods[] = {
     {"advance", (PyCFunction)(void (*)(void))mod_advance, METH_FASTCALL, advance_doc},
     {"period", (PyCFunction)(void (*)(void))mod_period, METH_FASTCALL, period_doc},
     {"fast_period", (PyCFunction)(void (*)(void))mod_fast_period, METH_FASTCALL, fast_period_doc},
+    {"word_intervals", (PyCFunction)(void (*)(void))mod_word_intervals, METH_FASTCALL, word_intervals_doc},
     {"duty_windows", (PyCFunction)(void (*)(void))mod_duty_windows, METH_FASTCALL, duty_windows_doc},
     {"duty_period", (PyCFunction)(void (*)(void))mod_duty_period, METH_FASTCALL, duty_period_doc},
     {"sample", (PyCFunction)(void (*)(void))mod_sample, METH_FASTCALL, sample_doc},
