@@ -11,8 +11,6 @@ from __future__ import annotations
 import math
 import random
 
-from scipy.integrate import solve_ivp
-
 from plant_rt import TRUTH_FIELDS, Plant, load_profile
 
 F = {name: i for i, name in enumerate(TRUTH_FIELDS)}
@@ -52,6 +50,9 @@ def run_against_reference(overrides: dict, duration_s: float, w_start: float, w_
                           seed: int, random_share: float = 0.5) -> dict:
     """Random gate words (half uniformly random, half steering the speed along a ramp from
     w_start to w_end); the plant and solve_ivp period by period from the same state."""
+    # scipy is a test and benchmark dependency, not a runtime one (requirements-runtime.lock)
+    from scipy.integrate import solve_ivp
+
     overrides = {**overrides, "initial": {**overrides.get("initial", {}), "speed_rad_s": w_start}}
     profile = load_profile(overrides=overrides)
     motor, T = profile.motor, profile.control_period_s
