@@ -29,14 +29,11 @@ decorators to the same results.
 """
 from __future__ import annotations
 
-import builtins
 import dataclasses
 import sys
 import types
 from operator import attrgetter
 from reprlib import recursive_repr
-
-from configfile import init_templates
 
 
 class _Factory:
@@ -83,25 +80,13 @@ def _standard(cls, frozen: bool, kwargs: dict):
 
 
 _INIT_CODES: dict[tuple, types.CodeType] = {}
-_INIT_FILENAME = "<dataclass __init__>"
 
 
 def _init_code(positional: int, keyword: int, order: tuple[int, ...]) -> types.CodeType:
-    """`def __init__(self, _0, .., *, _k, ..): _store(self, (arguments in `order`))`, once for
-    each count of parameters; `_store` is the function's one closure cell. Taken from
-    configfile.init_templates (compiled into its .pyc: a compile() here costs ~0.9 M
-    instructions) when the arguments are stored in their own order (keyword-only fields last)
-    and it has that count, else compiled."""
+    """`def __init__(self, _0, .., *, _k, ..): _store(self, (arguments in `order`))`, compiled
+    once for each count of parameters; `_store` is the function's one closure cell."""
     key = (positional, keyword, order)
     code = _INIT_CODES.get(key)
-    count = positional + keyword
-    if code is None and count <= init_templates.MAX_PARAMS and order == tuple(range(count)):
-        template = getattr(init_templates, f"store_{count}").__code__
-        code = next(c for c in template.co_consts if isinstance(c, types.CodeType))
-        # As compiled below: file and line, and the keyword-only tail counted as such.
-        code = code.replace(co_argcount=1 + positional, co_kwonlyargcount=keyword,
-                            co_filename=_INIT_FILENAME, co_firstlineno=2)
-        _INIT_CODES[key] = code
     if code is None:
         names = [f"_{i}" for i in range(positional + keyword)]
         params = ["self", *names[:positional], *(["*", *names[positional:]] if keyword else [])]
@@ -109,7 +94,7 @@ def _init_code(positional: int, keyword: int, order: tuple[int, ...]) -> types.C
         src = (f"def _make(_store):\n def __init__({', '.join(params)}):\n"
                f"  _store(self, ({args}))\n return __init__\n")
         namespace: dict = {}
-        exec(compile(src, _INIT_FILENAME, "exec"), namespace)  # noqa: S102 - fixed text
+        exec(compile(src, "<dataclass __init__>", "exec"), namespace)  # noqa: S102 - fixed text
         code = next(c for c in namespace["_make"].__code__.co_consts if isinstance(c, types.CodeType))
         _INIT_CODES[key] = code
     return code
@@ -173,39 +158,6 @@ def _init(cls, frozen: bool):
     init.__annotations__ = {**{f.name: f.type for f in in_order}, "return": None}
     init.__qualname__ = f"{cls.__qualname__}.__init__"
     return init
-
-
-def slots_init(cls):
-    """Gives a frozen, slotted dataclass declared with ``init=False`` (no __post_init__) an
-    __init__ that stores through the slot descriptors: `_set_<field>(self, <field>)` for each
-    field, `_set_<field>` being the slot's __set__ in the function's globals.
-
-    The generated frozen __init__ calls object.__setattr__ per field (0.76 us for the protocol's
-    SAMPLE); the slot descriptors halve that (protocol.messages: SAMPLE and GATES are built every
-    50 us). Instances stay frozen: __setattr__ still raises. The code is what compiling
-    `def __init__(self, a, b):\n    _set_a(self, a)\n    _set_b(self, b)\n` would give (same
-    names, file "<string>", lines), taken from configfile.init_templates up to its
-    MAX_PARAMS fields instead of compiled (~0.9 M instructions a class at import)."""
-    names = [f.name for f in dataclasses.fields(cls)]
-    if not names or hasattr(cls, "__post_init__") or "__init__" in cls.__dict__:
-        raise TypeError(f"{cls.__name__}: slots_init is for dataclasses with fields, declared "
-                        f"with init=False and without __post_init__")
-    namespace = {f"_set_{n}": cls.__dict__[n].__set__ for n in names}
-    if len(names) <= init_templates.MAX_PARAMS:
-        code = getattr(init_templates, f"slots_{len(names)}").__code__.replace(
-            co_varnames=("self", *names), co_names=tuple(f"_set_{n}" for n in names),
-            co_name="__init__", co_qualname="__init__", co_filename="<string>", co_firstlineno=1)
-        namespace["__builtins__"] = builtins.__dict__     # as exec would have
-        init = types.FunctionType(code, namespace, "__init__")
-        namespace["__init__"] = init      # where exec would have put it
-    else:
-        body = "".join(f"    _set_{n}(self, {n})\n" for n in names)
-        exec(f"def __init__(self, {', '.join(names)}):\n{body}", namespace)  # noqa: S102 - the field names
-        init = namespace["__init__"]
-    init.__qualname__ = f"{cls.__qualname__}.__init__"
-    init.__doc__ = None
-    cls.__init__ = init
-    return cls
 
 
 def _named(cls, method):
