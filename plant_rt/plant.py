@@ -388,8 +388,8 @@ class Plant:
             if t_next - t0 >= T:
                 seg_t, seg_v0, seg_slope, _ = self._load_seg
                 y, kinds, last, events, overflows, net.vdc, self._net_dirty = kernel.fast_period(
-                    self.motor._k, self.motor.spm, net._cfg(), net.kinds, net.legs_code(),
-                    intervals, t0, T, y, self._h_max, acc, seg_t, seg_v0, seg_slope, net.vdc,
+                    self.motor._k, net._cfg(), net.kinds, net.legs_code(), intervals, t0, T, y,
+                    self._h_max, acc, seg_t, seg_v0, seg_slope, net.vdc, self.motor.spm,
                     self._vectors, self.motor.b + self.load.kw, self._net_dirty)
                 net.set_state(kinds, last, events, overflows)
                 for _, _, word in intervals:

@@ -1025,6 +1025,108 @@ static void begin(net_t *n, double t, double *y, const int legs[3], int *last)
 
 static const int LEG_BITS[3][2] = {{0x01, 0x02}, {0x04, 0x08}, {0x10, 0x20}};
 
+/* What period() and fast_period() take first, in this order: (motor_k, cfg, kinds, last_legs,
+ * intervals, t0, T, y, h_max, acc, seg_t, seg_v0, slope, vdc); the network is configured. */
+typedef struct {
+    net_t n;
+    double t0, T, y[5], acc[3], h_max, seg_t, seg_v0, slope;
+    int last;
+    PyObject *intervals, *acc_list;
+} period_args_t;
+
+static int period_args(PyObject *const *args, const char *name, period_args_t *pa)
+{
+    memset(&pa->n, 0, sizeof pa->n);
+    int kinds[3];
+    long last_l = PyLong_AsLong(args[3]);
+    if (last_l == -1 && PyErr_Occurred()) {
+        return -1;
+    }
+    if (get_cfg(args[0], args[1], &pa->n.c) < 0 || get_kinds(args[2], kinds) < 0 ||
+        get_double(args[5], &pa->t0) < 0 || get_double(args[6], &pa->T) < 0 ||
+        get_doubles(args[7], pa->y, 5, "y") < 0 || get_double(args[8], &pa->h_max) < 0 ||
+        get_double(args[10], &pa->seg_t) < 0 || get_double(args[11], &pa->seg_v0) < 0 ||
+        get_double(args[12], &pa->slope) < 0 || get_double(args[13], &pa->n.vdc) < 0) {
+        return -1;
+    }
+    pa->intervals = args[4];
+    pa->acc_list = args[9];
+    if (!PyList_Check(pa->intervals)) {
+        PyErr_SetString(PyExc_TypeError, "intervals must be a list of (a, b, word)");
+        return -1;
+    }
+    if (!PyList_Check(pa->acc_list) || get_doubles(pa->acc_list, pa->acc, 3, "acc") < 0) {
+        if (!PyErr_Occurred()) {
+            PyErr_SetString(PyExc_TypeError, "acc must be a list of 3 floats");
+        }
+        return -1;
+    }
+    if (!(pa->h_max > 0.0) || !(pa->T > 0.0) || !isfinite(pa->t0)) {
+        PyErr_Format(PyExc_ValueError, "%s: need h_max > 0, T > 0, t0 finite", name);
+        return -1;
+    }
+    pa->last = (int)last_l;
+    configure(&pa->n, kinds);
+    return 0;
+}
+
+/* Interval i of the list: 1 with a, b, the word (0..63) and its legs (H, L or O each); 0 when
+ * it is too short to integrate (b - a <= 1e-15 T); -1 with an exception. */
+static int period_interval(const period_args_t *pa, Py_ssize_t i, double *a, double *b, long *word,
+                           int legs[3])
+{
+    PyObject *iv = PyList_GET_ITEM(pa->intervals, i);
+    if (!PyTuple_Check(iv) || PyTuple_GET_SIZE(iv) != 3) {
+        PyErr_SetString(PyExc_TypeError, "intervals must be a list of (a, b, word)");
+        return -1;
+    }
+    if (get_double(PyTuple_GET_ITEM(iv, 0), a) < 0 || get_double(PyTuple_GET_ITEM(iv, 1), b) < 0) {
+        return -1;
+    }
+    *word = PyLong_AsLong(PyTuple_GET_ITEM(iv, 2));
+    if (*word == -1 && PyErr_Occurred()) {
+        return -1;
+    }
+    if (*word < 0 || *word > 63) {
+        PyErr_SetString(PyExc_ValueError, "intervals: a word is 0..63");
+        return -1;
+    }
+    if (!(*b - *a > 1e-15 * pa->T)) {
+        return 0;
+    }
+    for (int x = 0; x < 3; x++) {
+        int on_h = (*word & LEG_BITS[x][0]) != 0, on_l = (*word & LEG_BITS[x][1]) != 0;
+        legs[x] = on_h && !on_l ? K_H : on_l && !on_h ? K_L : K_O;
+    }
+    return 1;
+}
+
+/* Network.set_load_segment, begin and integrate over [t0 + a, t0 + b]: one interval through the
+ * network, the load v0 + slope (t - (t0 + a)) over it. */
+static void network_interval(period_args_t *pa, double a, double b, double v0, const int legs[3])
+{
+    net_t *n = &pa->n;
+    double ta = pa->t0 + a;
+    n->c.tl_t = ta;
+    n->c.tl_v0 = v0;
+    n->c.tl_slope = pa->slope;
+    begin(n, ta, pa->y, legs, &pa->last);
+    net_integrate(n, ta, pa->t0 + b, pa->y, pa->h_max, pa->acc);
+}
+
+/* Writes acc back into the caller's list; 0, or -1 with an exception. */
+static int period_acc_back(period_args_t *pa)
+{
+    for (int i = 0; i < 3; i++) {
+        PyObject *f = PyFloat_FromDouble(pa->acc[i]);
+        if (f == NULL) {
+            return -1;
+        }
+        PyList_SetItem(pa->acc_list, i, f); /* steals f */
+    }
+    return 0;
+}
+
 PyDoc_STRVAR(period_doc,
 "period(motor_k, cfg, kinds, last_legs, intervals, t0, T, y, h_max, acc, seg_t, seg_v0, slope,\n"
 "       vdc) -> (y, kinds, last_legs, events, overflows, vdc, intervals_run)\n\n"
@@ -1041,80 +1143,32 @@ static PyObject *mod_period(PyObject *self, PyObject *const *args, Py_ssize_t na
         PyErr_SetString(PyExc_TypeError, "period takes 14 arguments");
         return NULL;
     }
-    net_t n;
-    memset(&n, 0, sizeof n);
-    double t0, T, y[5], acc[3], h_max, seg_t, seg_v0, slope;
-    int kinds[3];
-    long last_l = PyLong_AsLong(args[3]);
-    if (last_l == -1 && PyErr_Occurred()) {
+    period_args_t pa;
+    if (period_args(args, "period", &pa) < 0) {
         return NULL;
     }
-    if (get_cfg(args[0], args[1], &n.c) < 0 || get_kinds(args[2], kinds) < 0 ||
-        get_double(args[5], &t0) < 0 || get_double(args[6], &T) < 0 ||
-        get_doubles(args[7], y, 5, "y") < 0 || get_double(args[8], &h_max) < 0 ||
-        get_double(args[10], &seg_t) < 0 || get_double(args[11], &seg_v0) < 0 ||
-        get_double(args[12], &slope) < 0 || get_double(args[13], &n.vdc) < 0) {
-        return NULL;
-    }
-    PyObject *intervals = args[4], *acc_list = args[9];
-    if (!PyList_Check(intervals)) {
-        PyErr_SetString(PyExc_TypeError, "intervals must be a list of (a, b, word)");
-        return NULL;
-    }
-    if (!PyList_Check(acc_list) || get_doubles(acc_list, acc, 3, "acc") < 0) {
-        if (!PyErr_Occurred()) {
-            PyErr_SetString(PyExc_TypeError, "acc must be a list of 3 floats");
-        }
-        return NULL;
-    }
-    if (!(h_max > 0.0) || !(T > 0.0) || !isfinite(t0)) {
-        PyErr_SetString(PyExc_ValueError, "period: need h_max > 0, T > 0, t0 finite");
-        return NULL;
-    }
-    int last = (int)last_l;
-    configure(&n, kinds);
+    net_t *n = &pa.n;
     int ran = 0;
-    Py_ssize_t count = PyList_GET_SIZE(intervals);
+    Py_ssize_t count = PyList_GET_SIZE(pa.intervals);
     for (Py_ssize_t i = 0; i < count; i++) {
-        PyObject *iv = PyList_GET_ITEM(intervals, i);
-        if (!PyTuple_Check(iv) || PyTuple_GET_SIZE(iv) != 3) {
-            PyErr_SetString(PyExc_TypeError, "intervals must be a list of (a, b, word)");
-            return NULL;
-        }
         double a, b;
-        if (get_double(PyTuple_GET_ITEM(iv, 0), &a) < 0 ||
-            get_double(PyTuple_GET_ITEM(iv, 1), &b) < 0) {
+        long word;
+        int legs[3];
+        int got = period_interval(&pa, i, &a, &b, &word, legs);
+        if (got < 0) {
             return NULL;
         }
-        long word = PyLong_AsLong(PyTuple_GET_ITEM(iv, 2));
-        if (word == -1 && PyErr_Occurred()) {
-            return NULL;
-        }
-        if (!(b - a > 1e-15 * T)) {
+        if (!got) {
             continue;
         }
-        int legs[3];
-        for (int x = 0; x < 3; x++) {
-            int on_h = (word & LEG_BITS[x][0]) != 0, on_l = (word & LEG_BITS[x][1]) != 0;
-            legs[x] = on_h && !on_l ? K_H : on_l && !on_h ? K_L : K_O;
-        }
-        double ta = t0 + a;
-        n.c.tl_t = ta;
-        n.c.tl_v0 = seg_v0 + slope * (ta - seg_t);
-        n.c.tl_slope = slope;
-        begin(&n, ta, y, legs, &last);
-        net_integrate(&n, ta, t0 + b, y, h_max, acc);
+        network_interval(&pa, a, b, pa.seg_v0 + pa.slope * (pa.t0 + a - pa.seg_t), legs);
         ran++;
     }
-    for (int i = 0; i < 3; i++) {
-        PyObject *f = PyFloat_FromDouble(acc[i]);
-        if (f == NULL) {
-            return NULL;
-        }
-        PyList_SetItem(acc_list, i, f); /* steals f */
+    if (period_acc_back(&pa) < 0) {
+        return NULL;
     }
-    return Py_BuildValue("[ddddd](iii)illdi", y[0], y[1], y[2], y[3], y[4], n.kinds[0],
-                         n.kinds[1], n.kinds[2], last, n.events, n.overflows, n.vdc, ran);
+    return Py_BuildValue("[ddddd](iii)illdi", pa.y[0], pa.y[1], pa.y[2], pa.y[3], pa.y[4], n->kinds[0],
+                         n->kinds[1], n->kinds[2], pa.last, n->events, n->overflows, n->vdc, ran);
 }
 
 /* A driven word's vector as Plant._vectors holds it: (va, vb, ga, gb, legs); 0 none (None), 1 read,
@@ -1275,10 +1329,21 @@ static PyObject *mod_word_intervals(PyObject *self, PyObject *const *args, Py_ss
     return out;
 }
 
+/* After a fast interval: Network.set_driven(legs) if an interval went through the network since
+ * the last one (no open phase on this path, so the legs are the phases' states). */
+static void took_driven(period_args_t *pa, const int legs[3], int *net_dirty)
+{
+    if (*net_dirty) {
+        configure(&pa->n, legs);
+        pa->last = -1;
+        *net_dirty = 0;
+    }
+}
+
 PyDoc_STRVAR(fast_period_doc,
-"fast_period(motor_k, spm, cfg, kinds, last_legs, intervals, t0, T, y, h_max, acc, seg_t, seg_v0,\n"
-"            slope, vdc, vectors, bw, net_dirty) -> (y, kinds, last_legs, events, overflows, vdc,\n"
-"            net_dirty)\n\n"
+"fast_period(motor_k, cfg, kinds, last_legs, intervals, t0, T, y, h_max, acc, seg_t, seg_v0,\n"
+"            slope, vdc, spm, vectors, bw, net_dirty) -> (y, kinds, last_legs, events, overflows,\n"
+"            vdc, net_dirty)\n\n"
 "Plant._intervals' loop on the fast path (an ideal link, no device drop, no open phase) when no\n"
 "load knot falls in the period, operation by operation: a driven word's interval by the fast\n"
 "RK4 (Plant._advance), an interval with an open leg whose diode conducts throughout as the\n"
@@ -1294,98 +1359,53 @@ static PyObject *mod_fast_period(PyObject *self, PyObject *const *args, Py_ssize
         PyErr_SetString(PyExc_TypeError, "fast_period takes 18 arguments");
         return NULL;
     }
-    net_t n;
-    memset(&n, 0, sizeof n);
-    double t0, T, y[5], acc[3], h_max, seg_t, seg_v0, slope, bw;
-    int kinds[3];
-    long last_l = PyLong_AsLong(args[4]);
-    if (last_l == -1 && PyErr_Occurred()) {
+    period_args_t pa;
+    if (period_args(args, "fast_period", &pa) < 0) {
         return NULL;
     }
-    int spm = PyObject_IsTrue(args[1]);
+    int spm = PyObject_IsTrue(args[14]);
     int net_dirty = PyObject_IsTrue(args[17]);
-    if (spm < 0 || net_dirty < 0) {
+    double bw;
+    if (spm < 0 || net_dirty < 0 || get_double(args[16], &bw) < 0) {
         return NULL;
     }
-    if (get_cfg(args[0], args[2], &n.c) < 0 || get_kinds(args[3], kinds) < 0 ||
-        get_double(args[6], &t0) < 0 || get_double(args[7], &T) < 0 ||
-        get_doubles(args[8], y, 5, "y") < 0 || get_double(args[9], &h_max) < 0 ||
-        get_double(args[11], &seg_t) < 0 || get_double(args[12], &seg_v0) < 0 ||
-        get_double(args[13], &slope) < 0 || get_double(args[14], &n.vdc) < 0 ||
-        get_double(args[16], &bw) < 0) {
-        return NULL;
-    }
-    PyObject *intervals = args[5], *acc_list = args[10], *vectors = args[15];
-    if (!PyList_Check(intervals)) {
-        PyErr_SetString(PyExc_TypeError, "intervals must be a list of (a, b, word)");
-        return NULL;
-    }
+    PyObject *vectors = args[15];
     if (!PyList_Check(vectors) || PyList_GET_SIZE(vectors) != 64) {
         PyErr_SetString(PyExc_TypeError, "vectors must be a list of 64 entries");
         return NULL;
     }
-    if (!PyList_Check(acc_list) || get_doubles(acc_list, acc, 3, "acc") < 0) {
-        if (!PyErr_Occurred()) {
-            PyErr_SetString(PyExc_TypeError, "acc must be a list of 3 floats");
-        }
-        return NULL;
-    }
-    if (!(h_max > 0.0) || !(T > 0.0) || !isfinite(t0)) {
-        PyErr_SetString(PyExc_ValueError, "fast_period: need h_max > 0, T > 0, t0 finite");
-        return NULL;
-    }
-    int last = (int)last_l;
-    configure(&n, kinds);
-    Py_ssize_t count = PyList_GET_SIZE(intervals);
+    net_t *n = &pa.n;
+    double *y = pa.y;
+    Py_ssize_t count = PyList_GET_SIZE(pa.intervals);
     for (Py_ssize_t i = 0; i < count; i++) {
-        PyObject *iv = PyList_GET_ITEM(intervals, i);
-        if (!PyTuple_Check(iv) || PyTuple_GET_SIZE(iv) != 3) {
-            PyErr_SetString(PyExc_TypeError, "intervals must be a list of (a, b, word)");
-            return NULL;
-        }
         double a, b;
-        if (get_double(PyTuple_GET_ITEM(iv, 0), &a) < 0 ||
-            get_double(PyTuple_GET_ITEM(iv, 1), &b) < 0) {
+        long word;
+        int legs[3];
+        int got = period_interval(&pa, i, &a, &b, &word, legs);
+        if (got < 0) {
             return NULL;
         }
-        long word = PyLong_AsLong(PyTuple_GET_ITEM(iv, 2));
-        if (word == -1 && PyErr_Occurred()) {
-            return NULL;
-        }
-        if (word < 0 || word > 63) {
-            PyErr_SetString(PyExc_ValueError, "fast_period: a word is 0..63");
-            return NULL;
-        }
-        if (!(b - a > 1e-15 * T)) {
+        if (!got) {
             continue;
         }
-        double ta = t0 + a;
+        double ta = pa.t0 + a;
         double length = b - a;
         /* _load_segment(t0 + a) inside the segment that holds the whole period */
-        double v0 = seg_v0 + slope * (ta - seg_t);
+        double v0 = pa.seg_v0 + pa.slope * (ta - pa.seg_t);
         double v[4];
         int driven[3];
-        int got = driven_vector(vectors, word, v, driven);
+        got = driven_vector(vectors, word, v, driven);
         if (got < 0) {
             return NULL;
         }
         if (got) {
-            fast_advance(&n.c, spm, y, v, length, h_max, v0, slope, bw, acc);
-            if (net_dirty) {
-                configure(&n, driven);      /* Network.set_driven: no open phase here */
-                last = -1;
-                net_dirty = 0;
-            }
+            fast_advance(&n->c, spm, y, v, length, pa.h_max, v0, pa.slope, bw, pa.acc);
+            took_driven(&pa, driven, &net_dirty);
             continue;
-        }
-        int legs[3];
-        for (int x = 0; x < 3; x++) {
-            int on_h = (word & LEG_BITS[x][0]) != 0, on_l = (word & LEG_BITS[x][1]) != 0;
-            legs[x] = on_h && !on_l ? K_H : on_l && !on_h ? K_L : K_O;
         }
         /* _diode_interval: every open leg's diode by its current's sign, tried as that word */
         double ia, ib;
-        currents(&n.c, y[0], y[1], y[3], &ia, &ib);
+        currents(&n->c, y[0], y[1], y[3], &ia, &ib);
         double cur[3] = {ia, -0.5 * ia + S32 * ib, -0.5 * ia - S32 * ib};
         long equivalent = 0;
         int diode = 1;
@@ -1413,8 +1433,8 @@ static PyObject *mod_fast_period(PyObject *self, PyObject *const *args, Py_ssize
             }
             double trial[5] = {y[0], y[1], y[2], y[3], y[4]};
             double part[3] = {0.0, 0.0, 0.0};
-            fast_advance(&n.c, spm, trial, v, length, h_max, v0, slope, bw, part);
-            currents(&n.c, trial[0], trial[1], trial[3], &ia, &ib);
+            fast_advance(&n->c, spm, trial, v, length, pa.h_max, v0, pa.slope, bw, part);
+            currents(&n->c, trial[0], trial[1], trial[3], &ia, &ib);
             double after[3] = {ia, -0.5 * ia + S32 * ib, -0.5 * ia - S32 * ib};
             for (int x = 0; x < 3; x++) {
                 if (legs[x] == K_O && (after[x] > 0.0) != (cur[x] > 0.0)) {
@@ -1424,32 +1444,20 @@ static PyObject *mod_fast_period(PyObject *self, PyObject *const *args, Py_ssize
             if (diode) {
                 memcpy(y, trial, sizeof trial);
                 for (int j = 0; j < 3; j++) {
-                    acc[j] += part[j];
+                    pa.acc[j] += part[j];
                 }
-                if (net_dirty) {
-                    configure(&n, driven);
-                    last = -1;
-                    net_dirty = 0;
-                }
+                took_driven(&pa, driven, &net_dirty);
                 continue;
             }
         }
-        n.c.tl_t = ta;
-        n.c.tl_v0 = v0;
-        n.c.tl_slope = slope;
-        begin(&n, ta, y, legs, &last);
-        net_integrate(&n, ta, t0 + b, y, h_max, acc);
+        network_interval(&pa, a, b, v0, legs);
         net_dirty = 1;
     }
-    for (int i = 0; i < 3; i++) {
-        PyObject *f = PyFloat_FromDouble(acc[i]);
-        if (f == NULL) {
-            return NULL;
-        }
-        PyList_SetItem(acc_list, i, f); /* steals f */
+    if (period_acc_back(&pa) < 0) {
+        return NULL;
     }
-    return Py_BuildValue("[ddddd](iii)illdO", y[0], y[1], y[2], y[3], y[4], n.kinds[0],
-                         n.kinds[1], n.kinds[2], last, n.events, n.overflows, n.vdc,
+    return Py_BuildValue("[ddddd](iii)illdO", y[0], y[1], y[2], y[3], y[4], n->kinds[0],
+                         n->kinds[1], n->kinds[2], pa.last, n->events, n->overflows, n->vdc,
                          net_dirty ? Py_True : Py_False);
 }
 
