@@ -363,42 +363,33 @@ class Plant:
         acc = [0.0, 0.0, 0.0]
         fast = self._fast_ok and not self.load.locked
         kernel = self._ckernel
-        if kernel is not None and not fast:
-            # Every interval goes to the network: with no load knot in the period the kernel
-            # runs the loop below (begin + integrate per interval) in one call.
-            v0, slope, t_next = self._load_segment(t0)
-            if t_next - t0 >= T:
-                seg_t, seg_v0, seg_slope, _ = self._load_seg
-                y, kinds, last, events, overflows, net.vdc, ran = kernel.period(
-                    self.motor._k, net._cfg(), net.kinds, net.legs_code(), intervals, t0, T, y,
-                    self._h_max, acc, seg_t, seg_v0, seg_slope, net.vdc)
-                net.set_state(kinds, last, events, overflows)
-                for _, _, word in intervals:
-                    if _SHOOT_THROUGH[word]:
-                        self._flags |= STATUS_GATE_FAULT
-                if ran:
-                    self._net_dirty = True
-                intervals = ()
-        elif getattr(kernel, "fast_period", None) is not None:
-            # The loop below in one call (the fast RK4, the diode-equivalent trial and the
-            # network per interval, as it does them) when no load knot falls in the period: with
-            # dead time near current zeros a period has a dozen intervals, each a few Python
-            # calls (~80 us a period at 20 rad/s against ~5 us, bench.plant's low-speed figure).
-            v0, slope, t_next = self._load_segment(t0)
-            if t_next - t0 >= T:
-                seg_t, seg_v0, seg_slope, _ = self._load_seg
-                y, kinds, last, events, overflows, net.vdc, self._net_dirty = kernel.fast_period(
-                    self.motor._k, net._cfg(), net.kinds, net.legs_code(), intervals, t0, T, y,
-                    self._h_max, acc, seg_t, seg_v0, seg_slope, net.vdc, self.motor.spm,
-                    self._vectors, self.motor.b + self.load.kw, self._net_dirty)
-                net.set_state(kinds, last, events, overflows)
-                for _, _, word in intervals:
-                    if _SHOOT_THROUGH[word]:
-                        self._flags |= STATUS_GATE_FAULT
-                intervals = ()
-        for a, b, word in intervals:
+        for _, _, word in intervals:        # whichever path integrates the period
             if _SHOOT_THROUGH[word]:
                 self._flags |= STATUS_GATE_FAULT
+        # With no load knot in the period the kernel runs the loop below in one call: period()
+        # when every interval goes to the network (begin + integrate per interval), fast_period()
+        # on the fast path (the fast RK4, the diode-equivalent trial and the network per
+        # interval, as it does them: with dead time near current zeros a period has a dozen
+        # intervals, each a few Python calls; ~80 us a period at 20 rad/s against ~5 us,
+        # bench.plant's low-speed figure).
+        fast_period = getattr(kernel, "fast_period", None) if fast else None
+        if (kernel is not None and not fast) or fast_period is not None:
+            v0, slope, t_next = self._load_segment(t0)
+            if t_next - t0 >= T:
+                seg_t, seg_v0, seg_slope, _ = self._load_seg
+                args = (self.motor._k, net._cfg(), net.kinds, net.legs_code(), intervals, t0, T, y,
+                        self._h_max, acc, seg_t, seg_v0, seg_slope, net.vdc)
+                if fast_period is None:
+                    y, kinds, last, events, overflows, net.vdc, ran = kernel.period(*args)
+                    if ran:
+                        self._net_dirty = True
+                else:
+                    y, kinds, last, events, overflows, net.vdc, self._net_dirty = fast_period(
+                        *args, self.motor.spm, self._vectors, self.motor.b + self.load.kw,
+                        self._net_dirty)
+                net.set_state(kinds, last, events, overflows)
+                intervals = ()
+        for a, b, word in intervals:
             while b - a > 1e-15 * T:
                 v0, slope, t_next = self._load_segment(t0 + a)
                 end = min(b, t_next - t0) if t_next - t0 > a else b
