@@ -1136,6 +1136,9 @@ PyDoc_STRVAR(period_doc,
 "last_legs: the legs of the network's last begin coded l0 + 5 l1 + 25 l2, -1 for none;\n"
 "vdc: the network's last v_dc (returned as it is when no interval runs).");
 
+struct fast_path;
+static int run_intervals(period_args_t *pa, const struct fast_path *f, int *net_dirty, int *ran);
+
 static PyObject *mod_period(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     (void)self;
@@ -1147,26 +1150,11 @@ static PyObject *mod_period(PyObject *self, PyObject *const *args, Py_ssize_t na
     if (period_args(args, "period", &pa) < 0) {
         return NULL;
     }
-    net_t *n = &pa.n;
-    int ran = 0;
-    Py_ssize_t count = PyList_GET_SIZE(pa.intervals);
-    for (Py_ssize_t i = 0; i < count; i++) {
-        double a, b;
-        long word;
-        int legs[3];
-        int got = period_interval(&pa, i, &a, &b, &word, legs);
-        if (got < 0) {
-            return NULL;
-        }
-        if (!got) {
-            continue;
-        }
-        network_interval(&pa, a, b, pa.seg_v0 + pa.slope * (pa.t0 + a - pa.seg_t), legs);
-        ran++;
-    }
-    if (period_acc_back(&pa) < 0) {
+    int ran = 0, net_dirty = 0;
+    if (run_intervals(&pa, NULL, &net_dirty, &ran) < 0) {
         return NULL;
     }
+    const net_t *n = &pa.n;
     return Py_BuildValue("[ddddd](iii)illdi", pa.y[0], pa.y[1], pa.y[2], pa.y[3], pa.y[4], n->kinds[0],
                          n->kinds[1], n->kinds[2], pa.last, n->events, n->overflows, n->vdc, ran);
 }
@@ -1352,6 +1340,106 @@ PyDoc_STRVAR(fast_period_doc,
 "(Network.set_driven) if an interval through it came since the last time (net_dirty).\n"
 "vectors: Plant._vectors, 64 entries; bw: the motor's and the load's damping.");
 
+/* The fast path's extra inputs (fast_period's last arguments): the motor's surface-magnet flag,
+ * Plant._vectors and the motor's and the load's damping. */
+struct fast_path {
+    int spm;
+    PyObject *vectors;
+    double bw;
+};
+
+/* The intervals of pa, one after the other: on the fast path (f not NULL) a driven word's
+ * interval by the fast RK4 and an open leg whose diode conducts throughout as the equivalent
+ * driven word, every other interval through the network (all of them when f is NULL). *ran
+ * counts the network's intervals, *net_dirty says whether one came since the network last took
+ * driven legs. 0, or -1 with an exception. */
+static int run_intervals(period_args_t *pa, const struct fast_path *f, int *net_dirty, int *ran)
+{
+    net_t *n = &pa->n;
+    double *y = pa->y;
+    Py_ssize_t count = PyList_GET_SIZE(pa->intervals);
+    for (Py_ssize_t i = 0; i < count; i++) {
+        double a, b;
+        long word;
+        int legs[3];
+        int got = period_interval(pa, i, &a, &b, &word, legs);
+        if (got < 0) {
+            return -1;
+        }
+        if (!got) {
+            continue;
+        }
+        double ta = pa->t0 + a;
+        double length = b - a;
+        /* _load_segment(t0 + a) inside the segment that holds the whole period */
+        double v0 = pa->seg_v0 + pa->slope * (ta - pa->seg_t);
+        if (f != NULL) {
+            double v[4];
+            int driven[3];
+            got = driven_vector(f->vectors, word, v, driven);
+            if (got < 0) {
+                return -1;
+            }
+            if (got) {
+                fast_advance(&n->c, f->spm, y, v, length, pa->h_max, v0, pa->slope, f->bw, pa->acc);
+                took_driven(pa, driven, net_dirty);
+                continue;
+            }
+            /* _diode_interval: every open leg's diode by its current's sign, tried as that word */
+            double ia, ib;
+            currents(&n->c, y[0], y[1], y[3], &ia, &ib);
+            double cur[3] = {ia, -0.5 * ia + S32 * ib, -0.5 * ia - S32 * ib};
+            long equivalent = 0;
+            int diode = 1;
+            for (int x = 0; x < 3 && diode; x++) {
+                int side = legs[x];
+                if (side == K_O) {
+                    if (cur[x] > ZERO_CURRENT_A) {
+                        side = K_L;         /* current into the motor: low diode */
+                    } else if (cur[x] < -ZERO_CURRENT_A) {
+                        side = K_H;
+                    } else {
+                        diode = 0;          /* at zero: the network decides what follows */
+                    }
+                }
+                equivalent |= side == K_H ? LEG_BITS[x][0] : LEG_BITS[x][1];
+            }
+            if (diode) {
+                got = driven_vector(f->vectors, equivalent, v, driven);
+                if (got < 0) {
+                    return -1;
+                }
+                if (!got) {
+                    PyErr_SetString(PyExc_ValueError, "fast_period: no vector for a driven word");
+                    return -1;
+                }
+                double trial[5] = {y[0], y[1], y[2], y[3], y[4]};
+                double part[3] = {0.0, 0.0, 0.0};
+                fast_advance(&n->c, f->spm, trial, v, length, pa->h_max, v0, pa->slope, f->bw, part);
+                currents(&n->c, trial[0], trial[1], trial[3], &ia, &ib);
+                double after[3] = {ia, -0.5 * ia + S32 * ib, -0.5 * ia - S32 * ib};
+                for (int x = 0; x < 3; x++) {
+                    if (legs[x] == K_O && (after[x] > 0.0) != (cur[x] > 0.0)) {
+                        diode = 0;
+                    }
+                }
+                if (diode) {
+                    memcpy(y, trial, sizeof trial);
+                    for (int j = 0; j < 3; j++) {
+                        pa->acc[j] += part[j];
+                    }
+                    took_driven(pa, driven, net_dirty);
+                    continue;
+                }
+            }
+        }
+        network_interval(pa, a, b, v0, legs);
+        *net_dirty = 1;
+        (*ran)++;
+    }
+    return period_acc_back(pa);
+}
+
 static PyObject *mod_fast_period(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     (void)self;
@@ -1363,102 +1451,25 @@ static PyObject *mod_fast_period(PyObject *self, PyObject *const *args, Py_ssize
     if (period_args(args, "fast_period", &pa) < 0) {
         return NULL;
     }
-    int spm = PyObject_IsTrue(args[14]);
+    struct fast_path f;
+    f.spm = PyObject_IsTrue(args[14]);
+    f.vectors = args[15];
     int net_dirty = PyObject_IsTrue(args[17]);
-    double bw;
-    if (spm < 0 || net_dirty < 0 || get_double(args[16], &bw) < 0) {
+    if (f.spm < 0 || net_dirty < 0 || get_double(args[16], &f.bw) < 0) {
         return NULL;
     }
-    PyObject *vectors = args[15];
-    if (!PyList_Check(vectors) || PyList_GET_SIZE(vectors) != 64) {
+    if (!PyList_Check(f.vectors) || PyList_GET_SIZE(f.vectors) != 64) {
         PyErr_SetString(PyExc_TypeError, "vectors must be a list of 64 entries");
         return NULL;
     }
-    net_t *n = &pa.n;
-    double *y = pa.y;
-    Py_ssize_t count = PyList_GET_SIZE(pa.intervals);
-    for (Py_ssize_t i = 0; i < count; i++) {
-        double a, b;
-        long word;
-        int legs[3];
-        int got = period_interval(&pa, i, &a, &b, &word, legs);
-        if (got < 0) {
-            return NULL;
-        }
-        if (!got) {
-            continue;
-        }
-        double ta = pa.t0 + a;
-        double length = b - a;
-        /* _load_segment(t0 + a) inside the segment that holds the whole period */
-        double v0 = pa.seg_v0 + pa.slope * (ta - pa.seg_t);
-        double v[4];
-        int driven[3];
-        got = driven_vector(vectors, word, v, driven);
-        if (got < 0) {
-            return NULL;
-        }
-        if (got) {
-            fast_advance(&n->c, spm, y, v, length, pa.h_max, v0, pa.slope, bw, pa.acc);
-            took_driven(&pa, driven, &net_dirty);
-            continue;
-        }
-        /* _diode_interval: every open leg's diode by its current's sign, tried as that word */
-        double ia, ib;
-        currents(&n->c, y[0], y[1], y[3], &ia, &ib);
-        double cur[3] = {ia, -0.5 * ia + S32 * ib, -0.5 * ia - S32 * ib};
-        long equivalent = 0;
-        int diode = 1;
-        for (int x = 0; x < 3 && diode; x++) {
-            int side = legs[x];
-            if (side == K_O) {
-                if (cur[x] > ZERO_CURRENT_A) {
-                    side = K_L;             /* current into the motor: low diode */
-                } else if (cur[x] < -ZERO_CURRENT_A) {
-                    side = K_H;
-                } else {
-                    diode = 0;              /* at zero: the network decides what follows */
-                }
-            }
-            equivalent |= side == K_H ? LEG_BITS[x][0] : LEG_BITS[x][1];
-        }
-        if (diode) {
-            got = driven_vector(vectors, equivalent, v, driven);
-            if (got < 0) {
-                return NULL;
-            }
-            if (!got) {
-                PyErr_SetString(PyExc_ValueError, "fast_period: no vector for a driven word");
-                return NULL;
-            }
-            double trial[5] = {y[0], y[1], y[2], y[3], y[4]};
-            double part[3] = {0.0, 0.0, 0.0};
-            fast_advance(&n->c, spm, trial, v, length, pa.h_max, v0, pa.slope, bw, part);
-            currents(&n->c, trial[0], trial[1], trial[3], &ia, &ib);
-            double after[3] = {ia, -0.5 * ia + S32 * ib, -0.5 * ia - S32 * ib};
-            for (int x = 0; x < 3; x++) {
-                if (legs[x] == K_O && (after[x] > 0.0) != (cur[x] > 0.0)) {
-                    diode = 0;
-                }
-            }
-            if (diode) {
-                memcpy(y, trial, sizeof trial);
-                for (int j = 0; j < 3; j++) {
-                    pa.acc[j] += part[j];
-                }
-                took_driven(&pa, driven, &net_dirty);
-                continue;
-            }
-        }
-        network_interval(&pa, a, b, v0, legs);
-        net_dirty = 1;
-    }
-    if (period_acc_back(&pa) < 0) {
+    int ran = 0;
+    if (run_intervals(&pa, &f, &net_dirty, &ran) < 0) {
         return NULL;
     }
-    return Py_BuildValue("[ddddd](iii)illdO", y[0], y[1], y[2], y[3], y[4], n->kinds[0],
-                         n->kinds[1], n->kinds[2], pa.last, n->events, n->overflows, n->vdc,
-                         net_dirty ? Py_True : Py_False);
+    const net_t *n = &pa.n;
+    return Py_BuildValue("[ddddd](iii)illdO", pa.y[0], pa.y[1], pa.y[2], pa.y[3], pa.y[4],
+                         n->kinds[0], n->kinds[1], n->kinds[2], pa.last, n->events, n->overflows,
+                         n->vdc, net_dirty ? Py_True : Py_False);
 }
 
 PyDoc_STRVAR(settle_doc,
