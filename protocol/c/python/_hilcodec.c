@@ -2021,7 +2021,15 @@ static PyObject *mod_records_into(PyObject *self, PyObject *const *args, Py_ssiz
         goto done;
     }
     const double *v = (const double *)values.buf;
-    /* every double fits a 'd' field: only the others are checked */
+    /* The fields grouped by code once, so that each row is a few tight loops (a 'd' or 'f'
+     * field is one conversion and one store) instead of a switch a value; every double fits
+     * a 'd' field, so only the other codes are checked. */
+    Py_ssize_t by_code[6][64], n_by_code[6] = {0, 0, 0, 0, 0, 0};
+    static const char order[] = "dfIiQq";
+    for (Py_ssize_t i = 0; i < width; i++) {
+        Py_ssize_t c = strchr(order, code[i]) - order;
+        by_code[c][n_by_code[c]++] = i;
+    }
     Py_ssize_t checked[64], n_checked = 0;
     for (Py_ssize_t i = 0; i < width; i++) {
         if (code[i] != 'd') {
@@ -2041,37 +2049,34 @@ static PyObject *mod_records_into(PyObject *self, PyObject *const *args, Py_ssiz
     const uint8_t *tpl = (const uint8_t *)PyBytes_AS_STRING(template);
     uint8_t *p = (uint8_t *)out.buf + offset;
     for (Py_ssize_t r = 0; r < n; r++, p += size) {
+        const double *row = v + r * width;
         memcpy(p, tpl, (size_t)size);
         put_le(p + 15, t[r], 8);
         put_le(p + 23, t[r], 8);
-        for (Py_ssize_t i = 0; i < width; i++) {
-            double d = v[r * width + i];
-            uint64_t bits;
-            switch (code[i]) {
-            case 'd':
-                memcpy(&bits, &d, sizeof bits);
-                break;
-            case 'f': {
-                float f = (float)d;
-                uint32_t b32;
-                memcpy(&b32, &f, sizeof b32);
-                bits = b32;
-                break;
-            }
-            case 'I':
-                bits = (uint64_t)d;
-                break;
-            case 'i':
-                bits = (uint64_t)(uint32_t)(int32_t)d;
-                break;
-            case 'Q':
-                bits = (uint64_t)d;
-                break;
-            default: /* 'q' */
-                bits = (uint64_t)(int64_t)d;
-                break;
-            }
-            put_le(p + off[i], bits, nbytes[i]);
+        for (Py_ssize_t j = 0; j < n_by_code[0]; j++) {         /* 'd' */
+            Py_ssize_t i = by_code[0][j];
+            memcpy(p + off[i], &row[i], 8);
+        }
+        for (Py_ssize_t j = 0; j < n_by_code[1]; j++) {         /* 'f' */
+            Py_ssize_t i = by_code[1][j];
+            float f = (float)row[i];
+            memcpy(p + off[i], &f, 4);
+        }
+        for (Py_ssize_t j = 0; j < n_by_code[2]; j++) {         /* 'I' */
+            Py_ssize_t i = by_code[2][j];
+            put_le(p + off[i], (uint32_t)row[i], 4);
+        }
+        for (Py_ssize_t j = 0; j < n_by_code[3]; j++) {         /* 'i' */
+            Py_ssize_t i = by_code[3][j];
+            put_le(p + off[i], (uint32_t)(int32_t)row[i], 4);
+        }
+        for (Py_ssize_t j = 0; j < n_by_code[4]; j++) {         /* 'Q' */
+            Py_ssize_t i = by_code[4][j];
+            put_le(p + off[i], (uint64_t)row[i], 8);
+        }
+        for (Py_ssize_t j = 0; j < n_by_code[5]; j++) {         /* 'q' */
+            Py_ssize_t i = by_code[5][j];
+            put_le(p + off[i], (uint64_t)(int64_t)row[i], 8);
         }
     }
     result = PyLong_FromSsize_t(n);
