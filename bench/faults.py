@@ -1,6 +1,7 @@
 """Fault-plan figures that no check of the plans measures: the speed minimum and recovery of
-test_plans/faults/01_sensorless_frame_drop_burst (with the session's SAMPLE resends, as `hil run`
-runs it, and without them, as the session was when the plan was written), and the speed dip of
+test_plans/faults/01_sensorless_frame_drop_burst (as `hil run` runs it: its own override turns
+the session's SAMPLE resends off, as the session was when the plan was written; and with the
+session's default 3 resends, which recover every period of its burst), and the speed dip of
 test_plans/faults/03_resistance_drift during and after its 50 ms resistance ramp. docs/faults.md
 quotes them.
 
@@ -10,8 +11,8 @@ quotes them.
 Each run is the plan as `hil run` gives it (lockstep, link `stub`, seed 0, no reports, no log;
 `hil.run.runner.run_plan`), the figures computed from the run's signals (plant.speed_rpm, the
 plan's marks) and, where a check measures the same thing, taken from the check. Plan 01's
-variants change only the run: `answer_resends: 0` as a profile override (the plan's own
-`overrides` are empty), or the link_drop fault's `seed`. Deterministic: every fault and noise
+variants change only the run: `session.answer_resends` 3 instead of the plan's 0, or the
+link_drop fault's `seed`. Deterministic: every fault and noise
 stream is seeded.
 """
 from __future__ import annotations
@@ -102,15 +103,15 @@ def _drift() -> dict:
 def run(quick: bool = False) -> dict:
     t0 = time.perf_counter()
     burst = {"as_run": _burst(),
-             "without_resends": _burst(resends=0)}
+             "with_3_resends": _burst(resends=3)}
     if not quick:
         burst["link_drop_seeds_1_6"] = {
             "as_run_speed_min_rpm": [_burst(seed=s)["speed_min_rpm"] for s in range(1, 7)],
-            "without_resends_speed_min_rpm": [_burst(resends=0, seed=s)["speed_min_rpm"]
-                                              for s in range(1, 7)]}
+            "with_3_resends_speed_min_rpm": [_burst(resends=3, seed=s)["speed_min_rpm"]
+                                             for s in range(1, 7)]}
     out = {"01_sensorless_frame_drop_burst": burst,
            "03_resistance_drift": _drift(),
            "wall_s": _r(time.perf_counter() - t0),
-           "run": "lockstep, link stub, seed 0, no reports; plan 01 as run (the profile's "
-                  "session policy: 3 SAMPLE resends) and with answer_resends 0"}
+           "run": "lockstep, link stub, seed 0, no reports; plan 01 as run (its override: "
+                  "no SAMPLE resends) and with the session's default 3 resends"}
     return out

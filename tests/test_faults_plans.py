@@ -41,6 +41,9 @@ def test_fault_plans_pass(tmp_path, capsys):
     assert counters["out_dropped"] > 0 and counters["in_dropped"] > 0
     # a dropped SAMPLE is resent (SPEC 2.8.1) or, past its resends, its period is missed
     assert counters["resent_samples"] + counters["missed_answers"] >= counters["out_dropped"]
+    # the plan is about the board riding through missed periods: its resends are off, so the
+    # burst reaches the board (with the default 3 resends it would miss none: bench faults)
+    assert counters["missed_answers"] > 0 and counters["resent_samples"] == 0
     assert [f["action"] for f in drop["extra"]["faults_injected"]] == ["inject", "lift"]
 
     loss = results["fault-encoder-loss-detected"]
