@@ -2,12 +2,18 @@
 figures docs/plant.md and the README quote (phase-current error as a fraction of the peak,
 DC-link energy error as a fraction of the energy exchanged, current zero crossings seen).
 
-    python -m bench plant_accuracy            # the four short cases and the 1 s case (minutes)
-    python -m bench plant_accuracy --quick    # the four short cases only
+    python -m bench plant_accuracy            # every case, the 1 s runs included (about 5 min)
+    python -m bench plant_accuracy --quick    # without the 1 s runs, 2 of 12 C-kernel scenarios
+                                              # (under a minute)
 
 `solve_ivp_rotor_frame` adds the gate-word path against solve_ivp of the rotor-frame equations
 (bench/_rotor_frame_reference.py, which tests/test_plant_accuracy.py asserts limits on;
-about 40 s, quick about 8 s).
+about 40 s, quick about 8 s). `physics` adds the safe state and the diode bridge against
+per-phase diode-circuit references, the locked rotor, six-step speed, energy balances and the
+dead-time voltage error (bench/_plant_accuracy_physics.py, the runs of
+tests/test_plant_accuracy.py and tests/test_plant_physics.py); `c_kernel_vs_python` the C
+kernel against the Python path (bench/_plant_accuracy_ckernel.py, the runs of
+tests/test_plant_c_network.py).
 
 The reference and the comparison are bench/_switched_reference.py's (scipy solve_ivp,
 rtol 1e-10, on the circuit written from its equations, not from the plant's code); the tests
@@ -37,7 +43,28 @@ def run(quick: bool = False) -> dict:
                      "energy_error": float(f"{result['energy_rel']:.2g}"),
                      "zero_crossings": result["crossings"]}
     out["solve_ivp_rotor_frame"] = solve_ivp_figures(quick)
+    out["physics"] = physics_figures(quick)
+    out["c_kernel_vs_python"] = c_kernel_figures(quick)
     return out
+
+
+def physics_figures(quick: bool = False) -> dict:
+    """The plant against analytic results and diode-circuit references, as
+    tests/test_plant_accuracy.py and tests/test_plant_physics.py compute them (they assert
+    the limits; this prints the values docs/plant.md quotes). About 4 s, quick the same."""
+    from bench._plant_accuracy_physics import run as physics
+
+    return physics(quick)
+
+
+def c_kernel_figures(quick: bool = False) -> dict:
+    """The C kernel against the Python path, tests/test_plant_c_network.py's scenarios and
+    measure (worst difference per truth field relative to its range; the test asserts 1e-12),
+    and the same comparison with the resistance scaled by 1 + 1e-9 in the C calls alone.
+    About 7 s; quick: two of the twelve scenarios."""
+    from bench._plant_accuracy_ckernel import run as c_kernel
+
+    return c_kernel(quick)
 
 
 def solve_ivp_figures(quick: bool = False) -> dict:
