@@ -1077,9 +1077,21 @@ static int decode_onto(DecoderObject *dec, const uint8_t *p, size_t len, answer_
  * by decode_onto. 0, or -1 with an exception. Not inlined: bench/period_instructions.py counts it
  * by name. */
 __attribute__((noinline))
+/* Whether this interpreter has a Python thread besides the caller's (the Modbus port in thread
+ * mode, the live server), asked once a period: a few loads. Read with the GIL held: a thread
+ * state is added by the thread that starts it and removed by the thread that ends, each holding
+ * the GIL, so the list does not change under the caller. */
+static int other_threads(void)
+{
+    PyThreadState *me = PyThreadState_Get();
+    PyThreadState *head = PyInterpreterState_ThreadHead(PyThreadState_GetInterpreter(me));
+    return head != me || PyThreadState_Next(head) != NULL;
+}
+
 static int exchange_frames(const char *who, fw_exchange_fn exchange, void *fw, EncoderObject *enc,
                            DecoderObject *dec, PyObject *capture_out, PyObject *capture_in,
-                           PyObject *const *fields, int64_t *counts, answer_queue *q, PyObject **spill)
+                           PyObject *const *fields, int64_t *counts, answer_queue *q, PyObject **spill,
+                           int release_gil)
 {
     uint8_t frame[HIL_MAX_ENCODED_FRAME];
     int n_frame = encode_sample_frame(who, fields, enc, capture_out, frame);
@@ -1095,10 +1107,15 @@ static int exchange_frames(const char *who, fw_exchange_fn exchange, void *fw, E
      * periods, when they wake before the loop takes it back, instead of only once per switch
      * interval (5 ms): a Modbus request took 61 ms without this, 9.4 ms with it (bench modbus,
      * docs/modbus.md). The call touches only the frames on this stack and the board's own
-     * instance. */
-    Py_BEGIN_ALLOW_THREADS
-    n = exchange(fw, frame, (size_t)n_frame, tx, sizeof tx);
-    Py_END_ALLOW_THREADS
+     * instance. With no other thread (release_gil 0: other_threads()) the release would only
+     * cost its mutex operations, about 400 instructions a period. */
+    if (release_gil) {
+        Py_BEGIN_ALLOW_THREADS
+        n = exchange(fw, frame, (size_t)n_frame, tx, sizeof tx);
+        Py_END_ALLOW_THREADS
+    } else {
+        n = exchange(fw, frame, (size_t)n_frame, tx, sizeof tx);
+    }
     while (n > 0u) {
         frames_in += count_delimiters(tx, n);
         bytes_in += n;
@@ -1111,9 +1128,13 @@ static int exchange_frames(const char *who, fw_exchange_fn exchange, void *fw, E
         if (n < sizeof tx) {
             break;
         }
-        Py_BEGIN_ALLOW_THREADS
-        n = exchange(fw, NULL, 0u, tx, sizeof tx);   /* drain what did not fit */
-        Py_END_ALLOW_THREADS
+        if (release_gil) {
+            Py_BEGIN_ALLOW_THREADS
+            n = exchange(fw, NULL, 0u, tx, sizeof tx);   /* drain what did not fit */
+            Py_END_ALLOW_THREADS
+        } else {
+            n = exchange(fw, NULL, 0u, tx, sizeof tx);
+        }
     }
     counts[0] += 1;
     counts[1] += (int64_t)frames_in;
@@ -1132,7 +1153,7 @@ static PyObject *exchange_period(void *fn_addr, void *fw, EncoderObject *enc, De
         return NULL;
     }
     if (exchange_frames("exchange_sample", (fw_exchange_fn)(uintptr_t)fn_addr, fw, enc, dec, capture_out,
-                        capture_in, fields, counts, NULL, &out) < 0) {
+                        capture_in, fields, counts, NULL, &out, other_threads()) < 0) {
         Py_DECREF(out);
         return NULL;
     }
@@ -1680,7 +1701,7 @@ static PyObject *mod_exchange_periods(PyObject *self, PyObject *const *args, Py_
             }
             sent_at = monotonic_s();
         } else if (exchange_frames("exchange_periods", exchange, fw, enc, dec, capture_out, capture_in,
-                                   &PyTuple_GET_ITEM(s, 0), counts, &q, &spill) < 0) {
+                                   &PyTuple_GET_ITEM(s, 0), counts, &q, &spill, other_threads()) < 0) {
             Py_DECREF(s);
             failed = 1;
             break;
