@@ -9,28 +9,69 @@ show what the non-default paths cost (PWM duty input, dead time, device drop, al
 off), with the ratio of each PWM figure to the gate-word one from the same run (issue 14), and
 DUTY at low speed with small currents, with and without dead time: the regime where dead time
 costs most (the currents cross zero within the period).
+
+Every batch starts on a fresh plant in its scenario's initial state (built untimed) and runs
+REWARM_STEPS untimed periods before its timed ones, so every batch times the same stretch of
+the scenario: the first REWARM_STEPS + n periods from its initial state (the rated-speed
+DUTY rows slow down over it, the currents staying large). Until 2026-11-26 one plant ran on across a row's batches, and random duties
+brake the motor: the rated-speed rows' later batches ran far below rated speed, with small
+currents crossing zero, and their median depended on the number and length of the batches
+(quick and full runs timed different regimes); figures printed before then are not
+comparable with these.
+
+`pure_python` repeats every scenario on the pure-Python path (HIL_PLANT_PURE_PYTHON=1, the
+reference and fallback of the C kernel plant_rt/c/_plantnet.c), in a child process since the
+kernel is chosen at import: its figures, their own ratios to its gate-word figure, and
+`ratio_to_c`, each scenario's pure-Python median over the C one. The two processes take
+turns batch by batch (the parent waits while the child runs; which goes first alternates), so
+drift in the machine's load falls on both alike, and the two plants of a batch make the same
+calls in the same order: they follow the same trajectory, only the code differs. The untimed
+periods before a batch also keep it from starting on caches the other process has just
+cooled. When this process itself runs the Python path (the kernel not built, or
+HIL_PLANT_PURE_PYTHON set) there is nothing to compare: `kernel` says "python" and
+`pure_python` says why it is absent.
 """
 from __future__ import annotations
 
+import json
 import math
+import os
 import random
 import statistics
+import subprocess
+import sys
 import time
+from pathlib import Path
 
-from plant_rt import Plant, load_profile
+from plant_rt import Plant, ckernel, load_profile
 
 RATED_RAD_S = 3000.0 * 2 * 3.141592653589793 / 60
 WORDS = (0x29, 0x25, 0x26, 0x16, 0x1A, 0x19, 0x2A, 0x15)
+LOW_SPEED_RAD_S = 20.0
+#: Untimed steps before every timed batch (see the module's docstring).
+REWARM_STEPS = 20
 
-
-def _median_us(fn, batches: int, per_batch: int) -> float:
-    fn(max(100, per_batch // 10))                       # warm up (caches, noise blocks)
-    results = []
-    for _ in range(batches):
-        t0 = time.perf_counter_ns()
-        fn(per_batch)
-        results.append((time.perf_counter_ns() - t0) / per_batch / 1000.0)
-    return statistics.median(results)
+#: (figure key, scenario, slow): every timed row, in the order measured. Slow rows take fewer
+#: and shorter batches.
+ROWS = (
+    ("us_per_step", "gates_with_sensors", False),
+    ("us_step_only", "gates_only", False),
+    ("us_truth", "truth_only", False),
+    ("us_per_step_duty", "duty", True),
+    ("us_per_step_duty_dead_time_1us", "duty_dead_time", True),
+    ("us_per_step_duty_dead_time_2us_drop_1v5", "duty_dead_time_drop", True),
+    ("us_per_step_duty_low_speed_small_current", "low_speed", True),
+    ("us_per_step_duty_dead_time_1us_low_speed_small_current", "low_speed_dead_time", True),
+    ("us_per_step_all_switches_off", "all_off", True),
+)
+#: Issue 14's ratios: figure key over us_per_step (the gate-word figure) of the same path.
+RATIOS = (
+    ("ratio_duty", "us_per_step_duty"),
+    ("ratio_duty_dead_time_1us", "us_per_step_duty_dead_time_1us"),
+    ("ratio_duty_dead_time_2us_drop_1v5", "us_per_step_duty_dead_time_2us_drop_1v5"),
+    ("ratio_duty_dead_time_1us_low_speed_small_current",
+     "us_per_step_duty_dead_time_1us_low_speed_small_current"),
+)
 
 
 def _plant(**overrides) -> Plant:
@@ -38,116 +79,246 @@ def _plant(**overrides) -> Plant:
     return Plant(load_profile(overrides=overrides), seed=0)
 
 
-def run(quick: bool = False) -> dict:
-    batches, per_batch = (5, 2000) if quick else (15, 10000)
+def _inputs(per_batch: int) -> dict:
+    """The commands the scenarios replay (the same in the child process: seeded)."""
     rng = random.Random(0)
     words = [rng.choice(WORDS) for _ in range(per_batch)]
     duties = [(rng.random(), rng.random(), rng.random()) for _ in range(per_batch)]
-
-    plant = _plant()
-
-    def gates_with_sensors(n):
-        sample, step = plant.sample, plant.step
-        for g in words[:n]:
-            sample()
-            step(g)
-
-    def gates_only(n):
-        step = plant.step
-        for g in words[:n]:
-            step(g)
-
-    def truth_only(n):
-        truth = plant.truth
-        for _ in range(n):
-            truth()
-
-    duty_plant = _plant()
-
-    def duty(n):
-        sample, step = duty_plant.sample, duty_plant.step
-        for d in duties[:n]:
-            sample()
-            step(duty=d)
-
-    dead_plant = _plant(inverter={"dead_time_s": 1.0e-6})
-
-    def duty_dead_time(n):
-        sample, step = dead_plant.sample, dead_plant.step
-        for d in duties[:n]:
-            sample()
-            step(duty=d)
-
-    drop_plant = _plant(inverter={"dead_time_s": 2.0e-6, "device_drop_v": 1.5})
-
-    def duty_dead_time_drop(n):
-        sample, step = drop_plant.sample, drop_plant.step
-        for d in duties[:n]:
-            sample()
-            step(duty=d)
-
     # Low speed and small currents, as a current controller holds a lightly loaded motor near
-    # standstill: balanced duties 0.5 +- 0.03 rotating with the rotor (20 rad/s, ~190 rpm), so
-    # the phase currents are below an ampere and cross zero within most periods. Dead time
-    # then sets the leg voltage by the current's sign, and every such period leaves the C
-    # leg_period for the per-interval path (Plant._intervals).
-    low_speed_rad_s = 20.0
+    # standstill: balanced duties 0.5 +- 0.03 rotating at 20 rad/s (~190 rpm), the rotor's
+    # initial speed (it slows down over a batch), so the phase currents stay small (a couple of
+    # amperes at most) and cross zero within most periods. Dead time then sets the leg voltage
+    # by the current's sign, and every such period leaves the C leg_period for the
+    # per-interval path (Plant._intervals).
     low_duties = []
     for k in range(per_batch):
-        th = low_speed_rad_s * k * 50e-6
+        th = LOW_SPEED_RAD_S * k * 50e-6
         low_duties.append(tuple(0.5 + 0.03 * math.cos(th - 2.0 * math.pi * x / 3.0) for x in range(3)))
-    low_plants = {dead: _plant(inverter={"dead_time_s": dead}, initial={"speed_rad_s": low_speed_rad_s})
-                  for dead in (0.0, 1.0e-6)}
+    return {"words": words, "duties": duties, "low_duties": low_duties}
 
-    def low_speed(dead):
-        def steps(n):
-            p = low_plants[dead]
-            sample, step = p.sample, p.step
-            for d in low_duties[:n]:
+
+def _scenario(name: str, inputs: dict):
+    """A fresh plant for scenario `name` in its initial state, and `fn(n)` running n periods
+    of the scenario on it from there."""
+    words, duties, low_duties = inputs["words"], inputs["duties"], inputs["low_duties"]
+    if name in ("gates_with_sensors", "gates_only", "truth_only"):
+        plant = _plant()
+        if name == "gates_with_sensors":
+            def fn(n):
+                sample, step = plant.sample, plant.step
+                for g in words[:n]:
+                    sample()
+                    step(g)
+        elif name == "gates_only":
+            def fn(n):
+                step = plant.step
+                for g in words[:n]:
+                    step(g)
+        else:
+            for g in words[:100]:          # a state reached by gate words, not the initial one
+                plant.sample()
+                plant.step(g)
+
+            def fn(n):
+                truth = plant.truth
+                for _ in range(n):
+                    truth()
+        return plant, fn
+    if name == "all_off":
+        plant = _plant()
+        plant.safe_state()
+
+        def fn(n):
+            sample, step = plant.sample, plant.step
+            for _ in range(n):
                 sample()
-                step(duty=d)
-        return steps
+                step()
+        return plant, fn
+    inverter, initial, commands = {
+        "duty": ({}, RATED_RAD_S, duties),
+        "duty_dead_time": ({"dead_time_s": 1.0e-6}, RATED_RAD_S, duties),
+        "duty_dead_time_drop": ({"dead_time_s": 2.0e-6, "device_drop_v": 1.5}, RATED_RAD_S, duties),
+        "low_speed": ({"dead_time_s": 0.0}, LOW_SPEED_RAD_S, low_duties),
+        "low_speed_dead_time": ({"dead_time_s": 1.0e-6}, LOW_SPEED_RAD_S, low_duties),
+    }[name]
+    plant = _plant(inverter=inverter, initial={"speed_rad_s": initial})
 
-    off_plant = _plant()
-    off_plant.safe_state()
-
-    def all_off(n):
-        sample, step = off_plant.sample, off_plant.step
-        for _ in range(n):
+    def fn(n):
+        sample, step = plant.sample, plant.step
+        for d in commands[:n]:
             sample()
-            step()
+            step(duty=d)
+    return plant, fn
 
-    slow_batches = max(3, batches // 3)
-    slow_n = max(200, per_batch // 10)
-    us = _median_us(gates_with_sensors, batches, per_batch)
-    us_step = _median_us(gates_only, batches, per_batch)
-    us_duty = _median_us(duty, slow_batches, slow_n)
-    us_dead = _median_us(duty_dead_time, slow_batches, slow_n)
-    us_drop = _median_us(duty_dead_time_drop, slow_batches, slow_n)
-    us_low = _median_us(low_speed(0.0), slow_batches, slow_n)
-    us_low_dead = _median_us(low_speed(1.0e-6), slow_batches, slow_n)
+
+def _timed_ns(fn, n: int) -> int:
+    t0 = time.perf_counter_ns()
+    fn(n)
+    return time.perf_counter_ns() - t0
+
+
+class _PurePython:
+    """The child process running the scenarios on the pure-Python path, one call at a time."""
+
+    def __init__(self, per_batch: int):
+        env = dict(os.environ, HIL_PLANT_PURE_PYTHON="1")
+        env.pop("HIL_PLANT_C_PATH", None)
+        root = Path(__file__).resolve().parent.parent
+        env["PYTHONPATH"] = os.pathsep.join(p for p in (str(root), env.get("PYTHONPATH")) if p)
+        self.proc = subprocess.Popen(
+            [sys.executable, "-c", "import bench.plant as m; m._child()"],
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env, cwd=root)
+        self._send(str(per_batch))
+        hello = json.loads(self._receive())
+        if hello.get("kernel") != "python":
+            self.close()
+            raise RuntimeError(f"the child with HIL_PLANT_PURE_PYTHON=1 did not run the Python "
+                               f"path: {hello}")
+
+    def _send(self, line: str) -> None:
+        self.proc.stdin.write(line + "\n")
+        self.proc.stdin.flush()
+
+    def _receive(self) -> str:
+        line = self.proc.stdout.readline()
+        if not line:
+            raise RuntimeError(f"the pure-Python child ended (exit {self.proc.wait()})")
+        return line
+
+    def fresh(self, name: str) -> None:
+        """A fresh plant for scenario `name` in the child (see _scenario)."""
+        self._send(f"fresh {name}")
+        self._receive()
+
+    def timed_ns(self, n: int) -> int:
+        """n periods of the child's present scenario, in ns timed by the child."""
+        self._send(f"time {n}")
+        return int(self._receive())
+
+    def close(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.stdin.close()
+            self.proc.wait(timeout=30)
+
+
+def _child() -> None:
+    """The child's side of _PurePython: `fresh NAME` builds the scenario's plant, `time N`
+    answers the ns that N periods of it took."""
+    inputs = _inputs(int(sys.stdin.readline()))
+    on_c = ckernel.KERNEL is not None or _plant().c_kernel
+    print(json.dumps({"kernel": "c" if on_c else "python"}), flush=True)
+    fn = None
+    for line in sys.stdin:
+        verb, arg = line.split()
+        if verb == "fresh":
+            fn = _scenario(arg, inputs)[1]
+            print("ok", flush=True)
+        else:
+            print(_timed_ns(fn, int(arg)), flush=True)
+
+
+def _medians_us(name: str, inputs: dict, child: _PurePython | None, batches: int, n: int):
+    """Median us per period over batches of n periods of scenario `name`, here and (when there
+    is a child) on the Python path, the two taking turns batch by batch (which goes first
+    alternates). Every batch starts on a fresh plant in the scenario's initial state, and runs
+    REWARM_STEPS untimed periods before its timed n, so every batch times the same stretch of
+    the scenario's trajectory."""
+    warm = max(100, n // 10)                       # warm up (caches, noise blocks)
+    _scenario(name, inputs)[1](warm)
+    if child is not None:
+        child.fresh(name)
+        child.timed_ns(warm)
+    here, there = [], []
+
+    def local():
+        fn = _scenario(name, inputs)[1]
+        fn(REWARM_STEPS)
+        here.append(_timed_ns(fn, n) / n / 1000.0)
+
+    def remote():
+        child.fresh(name)
+        child.timed_ns(REWARM_STEPS)
+        there.append(child.timed_ns(n) / n / 1000.0)
+
+    for b in range(batches):
+        for part in ((local, remote) if b % 2 == 0 else (remote, local)):
+            if part is remote and child is None:
+                continue
+            part()
+    return statistics.median(here), (statistics.median(there) if there else None)
+
+
+def _with_ratios(us: dict) -> dict:
+    gate = us["us_per_step"]
+    out = {"us_per_step": round(gate, 3), "steps_per_second": round(1e6 / gate)}
+    out["us_step_only"] = round(us["us_step_only"], 3)
+    out["us_sensors"] = round(gate - us["us_step_only"], 3)
+    for key, _, _ in ROWS[2:]:
+        out[key] = round(us[key], 3)
+    for ratio, key in RATIOS:
+        out[ratio] = round(us[key] / gate, 2)
+    return out
+
+
+def run(quick: bool = False) -> dict:
+    batches, per_batch = (5, 2000) if quick else (15, 10000)
+    # The rows other than the gate words', from tens to hundreds of us a period on the Python
+    # path: shorter batches, and fewer.
+    slow_batches, slow_n = (3, 200) if quick else (9, 1000)
+    inputs = _inputs(per_batch)
+    period_s = _plant().control_period_s
+
+    on_c = ckernel.KERNEL is not None
+    child, absent = None, None
+    if not on_c:
+        absent = ("this process runs the Python path already: "
+                  + (ckernel.UNAVAILABLE_REASON or "HIL_PLANT_PURE_PYTHON is set"))
+    else:
+        child = _PurePython(per_batch)
+    us, us_py = {}, {}
+    try:
+        for key, name, slow in ROWS:
+            us[key], us_py[key] = _medians_us(name, inputs, child,
+                                              slow_batches if slow else batches,
+                                              slow_n if slow else per_batch)
+    finally:
+        if child is not None:
+            child.close()
+
+    gate = us["us_per_step"]
     figures = {
-        "us_per_step": round(us, 3),
-        "steps_per_second": round(1e6 / us),
-        "period_s": plant.control_period_s,
-        "realtime_fraction": round(us * 1e-6 / plant.control_period_s, 4),
-        "us_step_only": round(us_step, 3),
-        "us_sensors": round(us - us_step, 3),
-        "us_truth": round(_median_us(truth_only, batches, per_batch), 3),
-        "us_per_step_duty": round(us_duty, 3),
-        "us_per_step_duty_dead_time_1us": round(us_dead, 3),
-        "us_per_step_duty_dead_time_2us_drop_1v5": round(us_drop, 3),
+        "kernel": "c" if on_c else "python",
+        "us_per_step": round(gate, 3),
+        "steps_per_second": round(1e6 / gate),
+        "period_s": period_s,
+        "realtime_fraction": round(gate * 1e-6 / period_s, 4),
+        "us_step_only": round(us["us_step_only"], 3),
+        "us_sensors": round(gate - us["us_step_only"], 3),
+        "us_truth": round(us["us_truth"], 3),
+        "us_per_step_duty": round(us["us_per_step_duty"], 3),
+        "us_per_step_duty_dead_time_1us": round(us["us_per_step_duty_dead_time_1us"], 3),
+        "us_per_step_duty_dead_time_2us_drop_1v5": round(us["us_per_step_duty_dead_time_2us_drop_1v5"], 3),
         # Issue 14's aim: each at most 2x the gate-word figure (us_per_step) of this run.
-        "ratio_duty": round(us_duty / us, 2),
-        "ratio_duty_dead_time_1us": round(us_dead / us, 2),
-        "ratio_duty_dead_time_2us_drop_1v5": round(us_drop / us, 2),
+        "ratio_duty": round(us["us_per_step_duty"] / gate, 2),
+        "ratio_duty_dead_time_1us": round(us["us_per_step_duty_dead_time_1us"] / gate, 2),
+        "ratio_duty_dead_time_2us_drop_1v5": round(us["us_per_step_duty_dead_time_2us_drop_1v5"] / gate, 2),
         # Near current zeros at low speed (see low_duties): not in issue 14's aim, which was
         # measured at rated speed; printed so the cost of this regime is seen.
-        "us_per_step_duty_low_speed_small_current": round(us_low, 3),
-        "us_per_step_duty_dead_time_1us_low_speed_small_current": round(us_low_dead, 3),
-        "ratio_duty_dead_time_1us_low_speed_small_current": round(us_low_dead / us, 2),
-        "us_per_step_all_switches_off": round(_median_us(all_off, slow_batches, slow_n), 3),
+        "us_per_step_duty_low_speed_small_current": round(us["us_per_step_duty_low_speed_small_current"], 3),
+        "us_per_step_duty_dead_time_1us_low_speed_small_current":
+            round(us["us_per_step_duty_dead_time_1us_low_speed_small_current"], 3),
+        "ratio_duty_dead_time_1us_low_speed_small_current":
+            round(us["us_per_step_duty_dead_time_1us_low_speed_small_current"] / gate, 2),
+        "us_per_step_all_switches_off": round(us["us_per_step_all_switches_off"], 3),
         "batches": batches,
         "steps_per_batch": per_batch,
+        "slow_batches": slow_batches,
+        "steps_per_slow_batch": slow_n,
     }
+    if child is None:
+        figures["pure_python"] = {"absent": absent}
+    else:
+        pure = _with_ratios(us_py)
+        pure["ratio_to_c"] = {key: round(us_py[key] / us[key], 2) for key, _, _ in ROWS}
+        figures["pure_python"] = pure
     return figures
