@@ -8,7 +8,9 @@ in practice they are bit-identical; the limit leaves room for a libm or compiler
 Scenarios: random PWM duties with dead time and device drop through current zero crossings and
 knee crossings, at rated and twice rated speed; the safe state coasting at twice rated speed
 (diodes conducting into the link, then no current); gate words with a computation delay; an open
-phase; a dynamic and a resistive DC link; a locked rotor; a load table with a step.
+phase; a dynamic and a resistive DC link; a locked rotor; a load table with a step. The
+comparison, the counting wrapper of the extension and the scenarios are
+bench/_plant_accuracy_ckernel.py's (`python -m bench plant_accuracy` prints the values).
 
 One test perturbs a motor constant in the arguments of the C calls only (1e-9 relative): the
 same comparison must then fail, so it is shown that it can. The solve_ivp reference tests
@@ -17,7 +19,6 @@ default, which is C when the kernel is built.
 """
 from __future__ import annotations
 
-import math
 import os
 import random
 import subprocess
@@ -26,109 +27,24 @@ from pathlib import Path
 
 import pytest
 
-from plant_rt import Plant, TRUTH_FIELDS, ckernel, load_profile
+from bench._plant_accuracy_ckernel import PERTURBED, SCENARIOS, Counting
+from bench._plant_accuracy_ckernel import compare as compare_paths
+from plant_rt import Plant, ckernel, load_profile
 
-RATED_RAD_S = 3000.0 * 2.0 * math.pi / 60.0
 ROOT = Path(__file__).resolve().parents[1]
 LIMIT = 1e-12
-DROP = {"dead_time_s": 2.0e-6, "device_drop_v": 1.5}
-WORDS = (0x29, 0x25, 0x26, 0x16, 0x1A, 0x19, 0x2A, 0x15, 0x28, 0x09, 0x00)
 
 needs_kernel = pytest.mark.skipif(ckernel.EXTENSION is None,
                                   reason=f"C kernel not built: {ckernel.UNAVAILABLE_REASON}")
 
 
-class Counting:
-    """The extension with its calls counted (and optionally its motor constants changed)."""
-
-    def __init__(self, scale_r: float = 1.0):
-        self.calls = {"integrate": 0, "settle": 0, "leg_period": 0, "advance": 0,
-                      "duty_windows": 0, "period": 0, "fast_period": 0, "word_intervals": 0}
-        self.scale_r = scale_r
-
-    def _k(self, k):
-        if self.scale_r == 1.0:
-            return k
-        return (k[0], k[1] * self.scale_r) + tuple(k[2:])
-
-    def integrate(self, k, *args):
-        self.calls["integrate"] += 1
-        return ckernel.EXTENSION.integrate(self._k(k), *args)
-
-    def settle(self, k, *args):
-        self.calls["settle"] += 1
-        return ckernel.EXTENSION.settle(self._k(k), *args)
-
-    def leg_period(self, k, *args):
-        self.calls["leg_period"] += 1
-        return ckernel.EXTENSION.leg_period(self._k(k), *args)
-
-    def period(self, k, *args):
-        self.calls["period"] += 1
-        return ckernel.EXTENSION.period(self._k(k), *args)
-
-    def fast_period(self, k, *args):
-        self.calls["fast_period"] += 1
-        return ckernel.EXTENSION.fast_period(self._k(k), *args)
-
-    def word_intervals(self, *args):
-        self.calls["word_intervals"] += 1
-        return ckernel.EXTENSION.word_intervals(*args)
-
-    def advance(self, k, *args):
-        self.calls["advance"] += 1
-        return ckernel.EXTENSION.advance(self._k(k), *args)
-
-    def duty_windows(self, *args):
-        self.calls["duty_windows"] += 1
-        return ckernel.EXTENSION.duty_windows(*args)
-
-
-def make(kernel, overrides: dict, setup=None) -> Plant:
-    overrides = {**overrides}
-    overrides.setdefault("initial", {"speed_rad_s": RATED_RAD_S})
-    plant = Plant(load_profile(overrides=overrides), seed=0)
-    plant.use_c_kernel(kernel)
-    if setup is not None:
-        setup(plant)
-    return plant
-
-
 def compare(overrides: dict, n: int, seed: int, mode: str = "duty", setup=None,
             kernel=None) -> tuple[float, Counting, Plant]:
-    """Worst |C - Python| over the run, per signal relative to its range (max |value|, >= 1e-9)."""
-    kernel = kernel or Counting()
-    c_plant = make(kernel, overrides, setup)
-    py_plant = make(False, overrides, setup)
-    rng = random.Random(seed)
-    diff = [0.0] * len(TRUTH_FIELDS)
-    scale = [1e-9] * len(TRUTH_FIELDS)
-    for _ in range(n):
-        if mode == "duty":
-            d = (rng.random(), rng.random(), rng.random())
-            c_plant.step(duty=d)
-            py_plant.step(duty=d)
-        elif mode == "small_duty":
-            # balanced duties 0.5 +- 0.03 turning with the rotor at 20 rad/s, a little noise:
-            # sub-ampere currents crossing zero within most periods
-            th = 20.0 * c_plant.period * c_plant.control_period_s
-            d = tuple(0.5 + 0.03 * math.cos(th - 2.0 * math.pi * x / 3.0) + 0.002 * rng.random()
-                      for x in range(3))
-            c_plant.step(duty=d)
-            py_plant.step(duty=d)
-        elif mode == "gates":
-            g = rng.choice(WORDS)
-            c_plant.step(gates=g)
-            py_plant.step(gates=g)
-        else:
-            c_plant.step()
-            py_plant.step()
-        a, b = c_plant.truth(), py_plant.truth()
-        for i, (x, y) in enumerate(zip(a, b)):
-            diff[i] = max(diff[i], abs(x - y))
-            scale[i] = max(scale[i], abs(y))
+    """bench/_plant_accuracy_ckernel.py's compare (worst |C - Python| over the run, per signal
+    relative to its range), the two plants having met the same network events."""
+    worst, kernel, c_plant, py_plant = compare_paths(overrides, n, seed, mode, setup, kernel)
     assert c_plant.network.events == py_plant.network.events
-    return max(d / s for d, s in zip(diff, scale)), kernel, py_plant
+    return worst, kernel, py_plant
 
 
 @needs_kernel
@@ -158,10 +74,9 @@ def test_without_the_extension_the_plant_runs_python_and_says_why():
 
 
 @needs_kernel
-@pytest.mark.parametrize("speed", [RATED_RAD_S, 2.0 * RATED_RAD_S])
-def test_pwm_with_dead_time_and_drop_c_equals_python(speed):
-    worst, kernel, ref = compare({"inverter": DROP, "initial": {"speed_rad_s": speed}}, 1500,
-                                 seed=1)
+@pytest.mark.parametrize("scenario", ["pwm_dead_time_drop_rated", "pwm_dead_time_drop_twice_rated"])
+def test_pwm_with_dead_time_and_drop_c_equals_python(scenario):
+    worst, kernel, ref = compare(*SCENARIOS[scenario])
     assert worst <= LIMIT
     assert kernel.calls["leg_period"] > 0 and kernel.calls["period"] > 0
     assert kernel.calls["duty_windows"] > 0
@@ -170,8 +85,7 @@ def test_pwm_with_dead_time_and_drop_c_equals_python(speed):
 
 @needs_kernel
 def test_pwm_with_dead_time_through_zero_crossings_from_standstill():
-    worst, kernel, ref = compare({"inverter": {"dead_time_s": 1.0e-6},
-                                  "initial": {"speed_rad_s": 0.0}}, 1500, seed=2)
+    worst, kernel, ref = compare(*SCENARIOS["pwm_dead_time_from_standstill"])
     assert worst <= LIMIT
     # the network, the driven and the diode intervals of the general path (in one call a
     # period, fast_period, on an ideal link)
@@ -185,9 +99,7 @@ def test_pwm_with_dead_time_near_current_zeros_at_low_speed_c_equals_python():
     """Small balanced duties at 20 rad/s with 1 us dead time: most periods leave leg_period
     (a current crosses zero) for the per-interval path, in C fast_period: the fast RK4, the
     diode-equivalent trial, the network where a diode current reaches zero."""
-    worst, kernel, ref = compare({"inverter": {"dead_time_s": 1.0e-6},
-                                  "initial": {"speed_rad_s": 20.0}}, 1500, seed=3,
-                                 mode="small_duty")
+    worst, kernel, ref = compare(*SCENARIOS["pwm_dead_time_low_speed_small_current"])
     assert worst <= LIMIT
     assert kernel.calls["fast_period"] > 500 and ref.network.events > 100
     assert kernel.calls["word_intervals"] > 500
@@ -217,30 +129,17 @@ def test_the_word_interval_sweep_c_equals_python():
 
 @needs_kernel
 def test_safe_state_coast_at_twice_rated_speed_c_equals_python():
-    worst, kernel, ref = compare({"inverter": DROP, "initial": {"speed_rad_s": 2 * RATED_RAD_S}},
-                                 2000, seed=3, mode="none", setup=lambda p: p.safe_state())
+    worst, kernel, ref = compare(*SCENARIOS["safe_state_twice_rated"])
     assert worst <= LIMIT
     assert ref.network.events > 10 and kernel.calls["period"] > 0
 
 
-@pytest.mark.parametrize("name, overrides, mode, setup", [
-    ("hardware timing, gate words", {"timing": {"computation_delay_s": 50e-6}, "inverter": DROP},
-     "gates", None),
-    ("open phase", {"inverter": DROP}, "gates", lambda p: p.set_open_phase("b")),
-    ("dynamic link", {"dc_link": {"source_resistance_ohm": 0.5, "capacitance_f": 1e-3,
-                                  "unidirectional": True}}, "gates", None),
-    ("resistive link", {"dc_link": {"source_resistance_ohm": 0.5}}, "duty", None),
-    ("locked rotor", {"load": {"locked": True}, "inverter": DROP}, "duty", None),
-    ("load table with a step", {"load": {"table": [[0.0, 0.0], [0.02, 1.0], [0.02, -0.5],
-                                                   [0.04, 0.3]],
-                                         "speed_proportional_nm_per_rad_s": 1e-3},
-                                "inverter": DROP}, "duty", None),
-    ("interior magnet", {"motor": {"inductance_q_h": 9e-3}, "inverter": {"dead_time_s": 2e-6}},
-     "gates", None),
-])
+@pytest.mark.parametrize("name", ["gate_words_full_period_delay", "open_phase", "dynamic_link",
+                                  "resistive_link", "locked_rotor", "load_table_with_a_step",
+                                  "interior_magnet"])
 @needs_kernel
-def test_other_network_paths_c_equal_python(name, overrides, mode, setup):
-    worst, kernel, _ = compare(overrides, 1000, seed=4, mode=mode, setup=setup)
+def test_other_network_paths_c_equal_python(name):
+    worst, kernel, _ = compare(*SCENARIOS[name])
     assert worst <= LIMIT, name
     # (on an ideal link the general path's intervals go through fast_period)
     assert kernel.calls["integrate"] + kernel.calls["period"] + kernel.calls["fast_period"] > 0, name
@@ -248,7 +147,7 @@ def test_other_network_paths_c_equal_python(name, overrides, mode, setup):
 
 @needs_kernel
 def test_the_comparison_fails_when_the_c_side_gets_a_perturbed_resistance():
-    worst, kernel, _ = compare({"inverter": DROP}, 400, seed=5, kernel=Counting(scale_r=1 + 1e-9))
+    worst, kernel, _ = compare(*PERTURBED, kernel=Counting(scale_r=1 + 1e-9))
     assert kernel.calls["leg_period"] > 0
     assert worst > 100 * LIMIT
 

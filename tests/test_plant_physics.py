@@ -1,5 +1,9 @@
 """The plant against analytic results: locked rotor, six-step no-load speed, energy balance,
-eq. (6) torque, dead-time voltage error, PWM and computation-delay timing, loads."""
+eq. (6) torque, dead-time voltage error, PWM and computation-delay timing, loads.
+
+The runs of the locked rotor, six-step, energy-balance, regeneration and dead-time tests, the
+six-step balance and the energy terms are bench/_plant_accuracy_physics.py's (`python -m bench
+plant_accuracy` prints the values); the tests here assert the limits."""
 from __future__ import annotations
 
 import math
@@ -8,47 +12,23 @@ import random
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
-from scipy.optimize import brentq
 
-from plant_rt import TRUTH_FIELDS, Plant, load_profile
-
-F = {name: i for i, name in enumerate(TRUTH_FIELDS)}
-V1, V2, V3, V4, V5, V6 = 0x29, 0x25, 0x26, 0x16, 0x1A, 0x19
-VECTORS = (V1, V2, V3, V4, V5, V6)
-AXES = ((1.0, 0.0), (-0.5, math.sqrt(3) / 2), (-0.5, -math.sqrt(3) / 2))
-QUIET = {"sensors": {"current": {"noise_rms_counts": 0.0}, "dc_voltage": {"noise_rms_counts": 0.0}}}
-
-
-def profile(**sections):
-    merged = {k: dict(v) for k, v in QUIET.items()}
-    for key, value in sections.items():
-        merged[key] = {**merged.get(key, {}), **value}
-    return load_profile(overrides=merged)
-
-
-def clarke(va: float, vb: float, vc: float) -> tuple[float, float]:
-    return (2 * va - vb - vc) / 3, (vb - vc) / math.sqrt(3)
+from bench._plant_accuracy_physics import (ENERGY_BALANCE_CASES, LOCKED_ROTOR_CASES, V1, V2,
+                                           VECTORS, F, clarke, dead_time_leg_voltages,
+                                           dead_time_truth, energy_balance_terms,
+                                           locked_rotor_run, regeneration_run, six_step_run)
+from bench._plant_accuracy_physics import quiet_profile as profile
+from plant_rt import Plant
 
 
 # ------------------------------------------------------------------ locked rotor
-@pytest.mark.parametrize("ld,lq,theta,axis_l", [
-    (4.8e-3, 4.8e-3, 0.0, "d"),
-    (3.0e-3, 7.0e-3, 0.0, "d"),            # V1 along the d-axis: Ld / R
-    (3.0e-3, 7.0e-3, math.pi / 2, "q"),    # rotor turned 90 deg: V1 along -q: Lq / R
-])
+@pytest.mark.parametrize("ld,lq,theta,axis_l", list(LOCKED_ROTOR_CASES.values()))
 def test_locked_rotor_dc_current_is_v_over_r_with_l_over_r(ld, lq, theta, axis_l):
-    """V1 held on a locked rotor: i_a(t) = (2U/3)/R (1 - exp(-t R/L)), i_b = i_c = -i_a/2."""
-    p = profile(motor={"inductance_d_h": ld, "inductance_q_h": lq},
-                load={"locked": True}, initial={"theta_m_rad": theta})
-    r = p.motor.resistance_ohm
-    L = ld if axis_l == "d" else lq
-    i_final = (2 * 70.0 / 3) / r
-    plant = Plant(p)
-    T = p.control_period_s
-    for k in range(1, round(25 * L / r / T) + 1):  # 25 time constants
-        plant.step(gates=V1)
-        t = plant.truth()
-        expected = i_final * (1 - math.exp(-k * T * r / L))
+    """V1 held on a locked rotor: i_a(t) = (2U/3)/R (1 - exp(-t R/L)), i_b = i_c = -i_a/2.
+    (Ld != Lq: at theta 0 V1 lies along the d-axis, L = Ld; turned 90 deg along -q, L = Lq.)"""
+    run = locked_rotor_run(ld, lq, theta, axis_l)  # 25 time constants
+    r, i_final = run["r"], run["i_final"]
+    for t, expected in run["trace"]:
         assert abs(t[F["i_a"]] - expected) < 1e-9 * i_final
         assert abs(t[F["i_b"]] + expected / 2) < 1e-9 * i_final
         assert abs(t[F["i_c"]] + expected / 2) < 1e-9 * i_final
@@ -82,74 +62,20 @@ def test_locked_rotor_current_follows_resistance_and_source_changes():
 
 
 # ---------------------------------------------------------- six-step no load
-def six_step_speed(motor, vdc: float, period_s: float) -> float:
-    """Steady no-load speed of rotor-position six-step drive from the back-EMF balance.
-
-    Over each 60 deg sector the applied vector sweeps 60..120 deg ahead of the d-axis, so the
-    mean voltage is 2U/pi on the q-axis, less the mean commutation lag of half a sampling
-    period. With the speed constant the rotor-frame equations are linear, so the mean
-    currents obey them exactly:  u_d = R i_d - w L i_q,  u_q = R i_q + w L i_d + w psi_m,
-    and the mean torque 1.5 p psi_m i_q balances the damping B w_m."""
-    L, R, psim = motor.inductance_d_h, motor.resistance_ohm, motor.flux_linkage_wb
-    B, p = motor.damping_nm_per_rad_s, motor.pole_pairs
-    V = 2 * vdc / math.pi
-
-    def balance(we):
-        phi = math.pi / 2 - we * period_s / 2
-        iq = B * (we / p) / (1.5 * p * psim)
-        i_d = (V * math.cos(phi) + we * L * iq) / R
-        return V * math.sin(phi) - (R * iq + we * L * i_d + we * psim)
-    return brentq(balance, 50.0, 5000.0) / p
-
-
 def test_six_step_no_load_speed_matches_back_emf_balance():
     """Self-commutated six-step (vector nearest 90 deg ahead of the rotor) at 5 us sampling.
 
     The inertia is cut tenfold so the speed settles within the test; it does not enter the
     steady state. The balance lands 8 % below the naive 2U/(pi psi_m) because of the R and
     w L i_d drops, so this checks the Table 2 voltages, R, L and psi_m together."""
-    T = 5e-6
-    base = {"control_period_s": T, "max_step_s": T}
-    motor = profile(timing=base).motor
-    w_pred = six_step_speed(motor, 70.0, T)
-    assert 0.85 < w_pred / (2 * 70.0 / math.pi / motor.flux_linkage_wb) < 0.95
-    p = profile(timing=base, motor={"inertia_kgm2": 8.0e-5}, initial={"speed_rad_s": w_pred})
-    plant = Plant(p)
-    speeds = []
-    n_settle, n_avg = round(0.25 / T), round(0.15 / T)
-    for k in range(n_settle + n_avg):
-        t = plant.truth()
-        j = round((t[F["theta_e_rad"]] + math.pi / 2) / (math.pi / 3)) % 6
-        plant.step(gates=VECTORS[j])
-        if k >= n_settle:
-            speeds.append(t[F["speed_rad_s"]])
-    w_sim = sum(speeds) / len(speeds)
+    run = six_step_run()                      # the balance: six_step_speed
+    w_pred, w_sim = run["w_pred"], run["w_sim"]
+    assert 0.85 < w_pred / run["naive"] < 0.95   # naive: 2U/(pi psi_m)
     assert abs(w_sim - w_pred) < 1e-3 * w_pred
 
 
 # --------------------------------------------------------------- energy balance
-def energy_terms(rows: np.ndarray, motor, T: float) -> dict:
-    a = rows
-    e_dc = float(np.sum(a[1:, F["v_dc"]] * a[1:, F["i_dc"]]) * T)
-    copper = float(np.trapezoid(1.5 * motor.resistance_ohm
-                                * (a[:, F["i_alpha"]] ** 2 + a[:, F["i_beta"]] ** 2), dx=T))
-    w = a[:, F["speed_rad_s"]]
-    damping = float(np.trapezoid(motor.damping_nm_per_rad_s * w ** 2, dx=T))
-    load = float(np.trapezoid(a[:, F["load_torque_nm"]] * w, dx=T))
-    kinetic = 0.5 * motor.inertia_kgm2 * (w[-1] ** 2 - w[0] ** 2)
-
-    def magnetic(row):
-        th = row[F["theta_e_rad"]]
-        c, s = math.cos(th), math.sin(th)
-        i_d = c * row[F["i_alpha"]] + s * row[F["i_beta"]]
-        i_q = -s * row[F["i_alpha"]] + c * row[F["i_beta"]]
-        return 0.75 * (motor.inductance_d_h * i_d ** 2 + motor.inductance_q_h * i_q ** 2)
-    return {"dc": e_dc, "copper": copper, "damping": damping, "load": load, "kinetic": kinetic,
-            "magnetic": magnetic(a[-1]) - magnetic(a[0])}
-
-
-@pytest.mark.parametrize("ld,lq,dead_time", [(4.8e-3, 4.8e-3, 0.0), (3.0e-3, 7.0e-3, 0.0),
-                                             (4.8e-3, 4.8e-3, 0.5e-6)])
+@pytest.mark.parametrize("ld,lq,dead_time", list(ENERGY_BALANCE_CASES.values()))
 def test_energy_balance(ld, lq, dead_time):
     """DC-link energy = copper loss + kinetic energy change + damping + load work (+ the
     change of stored magnetic energy), from rest with a constant plus speed-proportional
@@ -157,19 +83,7 @@ def test_energy_balance(ld, lq, dead_time):
 
     Issue 2 asks for 0.5 %; the balance closes to about 1e-7 without dead time and 5e-5 with
     it (the trapezoid rule on the sampled truth is the limit), so 0.1 % is asserted."""
-    T = 10e-6
-    p = profile(timing={"control_period_s": T, "max_step_s": T},
-                motor={"inductance_d_h": ld, "inductance_q_h": lq},
-                inverter={"dead_time_s": dead_time},
-                load={"torque_nm": 0.2, "speed_proportional_nm_per_rad_s": 5e-4})
-    plant = Plant(p)
-    rows = [plant.truth()]
-    for _ in range(round(0.15 / T)):
-        th = rows[-1][F["theta_e_rad"]]
-        duty = [0.5 + 0.45 * math.cos(th + 1.9 - 2 * math.pi * x / 3) for x in range(3)]
-        plant.step(duty=duty)
-        rows.append(plant.truth())
-    e = energy_terms(np.array(rows), p.motor, T)
+    e = energy_balance_terms(ld, lq, dead_time)
     assert e["dc"] > 1.0 and e["kinetic"] > 0.2 and e["load"] > 0.1
     out = e["copper"] + e["kinetic"] + e["damping"] + e["load"] + e["magnetic"]
     assert abs(e["dc"] - out) < 1e-3 * e["dc"]
@@ -180,26 +94,15 @@ def test_regeneration_through_diodes_raises_unidirectional_bus_voltage():
     exceeds the 70 V link, the diodes rectify it into the bus capacitor, which the rectifier
     source cannot discharge, so v_dc rises above 70 V. Capacitor energy gained equals the
     energy the inverter returned; the rotor's lost kinetic energy pays for it and the losses."""
-    T = 10e-6
-    p = profile(timing={"control_period_s": T, "max_step_s": T},
-                dc_link={"source_resistance_ohm": 0.2, "capacitance_f": 2.0e-3,
-                         "unidirectional": True},
-                initial={"speed_rad_s": 2 * 314.159})
-    plant = Plant(p)
-    rows = [plant.truth()]
-    for _ in range(round(0.05 / T)):
-        plant.step()
-        rows.append(plant.truth())
-    a = np.array(rows)
-    v = a[:, F["v_dc"]]
+    run = regeneration_run()                  # 50 ms at 10 us, 0.2 ohm source, 2 mF
+    v = run["v"]
     assert v[-1] > 80.0
     assert np.all(np.diff(v) >= -1e-9)                 # never discharged into the source
     # Bus: the capacitor took exactly what the inverter returned (trapezoid on v).
-    returned = -float(np.sum(0.5 * (v[1:] + v[:-1]) * a[1:, F["i_dc"]]) * T)
-    stored = 0.5 * 2.0e-3 * (v[-1] ** 2 - v[0] ** 2)
+    returned, stored = run["returned"], run["stored"]
     assert stored > 1.0
     assert abs(returned - stored) < 1e-6 * stored
-    e = energy_terms(a, p.motor, T)
+    e = run["energy"]
     assert abs((-e["kinetic"] - e["magnetic"]) - (returned + e["copper"] + e["damping"])) \
         < 1e-5 * returned
 
@@ -239,16 +142,11 @@ def test_torque_equals_eq6_from_flux_and_current(ld, lq):
 def test_dead_time_voltage_error_follows_current_sign(duty, signs):
     """Centre-aligned PWM with dead time td on a locked rotor (DC currents): each leg's mean
     voltage is d U - sign(i) U td / T (the dead interval takes the diode the current picks)."""
-    td, T = 1.0e-6, 50e-6
-    p = profile(inverter={"dead_time_s": td}, load={"locked": True})
-    plant = Plant(p)
-    for _ in range(3000):
-        plant.step(duty=duty)
-    t = plant.truth()
+    t = dead_time_truth(duty)                 # td 1 us at T 50 us, 3000 periods
     currents = (t[F["i_a"]], t[F["i_b"]], t[F["i_c"]])
     assert tuple(1 if i > 0 else -1 for i in currents) == signs
     assert min(abs(i) for i in currents) > 1.0
-    legs = [d * 70.0 - s * 70.0 * td / T for d, s in zip(duty, signs)]
+    legs = dead_time_leg_voltages(duty, signs)   # d U - sign(i) U td / T
     ideal = clarke(*(d * 70.0 for d in duty))
     expected = clarke(*legs)
     assert abs(t[F["u_alpha"]] - expected[0]) < 1e-9 and abs(t[F["u_beta"]] - expected[1]) < 1e-9
