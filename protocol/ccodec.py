@@ -33,7 +33,7 @@ from protocol.messages import MESSAGE_CLASSES
 
 BUILD_DIR = Path(__file__).resolve().parent / "c" / "build"
 _API = ("FrameEncoder", "StreamDecoder", "encode_frame", "crc16", "exchange_sample",
-        "exchange_periods", "records_into", "stage_period", "stage_telemetry")
+        "exchange_periods", "records_into", "stage_period", "stage_telemetry", "index_span")
 
 
 def extension_path() -> Path:
@@ -80,6 +80,7 @@ else:
     records_into = getattr(_ext, "records_into", None)
     stage_period = getattr(_ext, "stage_period", None)
     stage_telemetry = getattr(_ext, "stage_telemetry", None)
+    index_span = getattr(_ext, "index_span", None)
 
 
 def __getattr__(name: str):

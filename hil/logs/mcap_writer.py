@@ -59,6 +59,9 @@ _LABEL_OPTIONAL = 1             # FieldDescriptorProto.LABEL_OPTIONAL
 
 #: The C codec extension's record packer (FixedChannel.write_many), None without it.
 _RECORDS_INTO = ccodec.records_into if ccodec.AVAILABLE else None
+#: The chunk's time span from its message indexes in one C call (protocol.ccodec.index_span),
+#: where numpy's took two reductions a channel, about 45 us a chunk; None: numpy's.
+_INDEX_SPAN = ccodec.index_span if ccodec.AVAILABLE else None
 
 # Message record prefix: opcode, record length, channel id, sequence, log time, publish time.
 _MESSAGE_PREFIX = "<BQHIQQ"
@@ -716,9 +719,12 @@ class McapLog:
         if not fill:
             return
         active = [c for c in self._channels if c._index]
-        times = [np.frombuffer(c._index, dtype=np.uint64)[0::2] for c in active]
-        start = int(min(t.min() for t in times))
-        end = int(max(t.max() for t in times))
+        if _INDEX_SPAN is not None:
+            start, end = _INDEX_SPAN([c._index for c in active])
+        else:
+            times = [np.frombuffer(c._index, dtype=np.uint64)[0::2] for c in active]
+            start = int(min(t.min() for t in times))
+            end = int(max(t.max() for t in times))
         with memoryview(chunk.buf) as whole, whole[:fill] as raw:
             data = self._compress(raw) if self._compress else bytes(raw)
             raw_crc = crc32(raw)

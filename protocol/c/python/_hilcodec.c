@@ -2108,6 +2108,54 @@ done:
     return result;
 }
 
+PyDoc_STRVAR(index_span_doc,
+"index_span(indexes) -> (earliest, latest)\n\n"
+"The earliest and latest log time in a chunk's message indexes, the chunk record's message\n"
+"start and end time (hil/logs/mcap_writer.py McapLog._finish_chunk): `indexes` is a list of\n"
+"buffers of native uint64, each one channel's (log time, offset) pairs interleaved, the times\n"
+"the even entries, in any order. ValueError when a buffer is not whole pairs or no buffer\n"
+"holds one.");
+
+static PyObject *mod_index_span(PyObject *self, PyObject *arg)
+{
+    (void)self;
+    PyObject *seq = PySequence_Fast(arg, "index_span: a list of buffers");
+    if (seq == NULL) {
+        return NULL;
+    }
+    uint64_t earliest = UINT64_MAX, latest = 0;
+    int any = 0;
+    for (Py_ssize_t i = 0; i < PySequence_Fast_GET_SIZE(seq); i++) {
+        Py_buffer b;
+        if (PyObject_GetBuffer(PySequence_Fast_GET_ITEM(seq, i), &b, PyBUF_C_CONTIGUOUS) < 0) {
+            Py_DECREF(seq);
+            return NULL;
+        }
+        if (b.len % 16 != 0) {
+            PyErr_Format(PyExc_ValueError, "index_span: buffer %zd holds %zd bytes, not whole (time, offset) "
+                         "pairs of uint64", i, b.len);
+            PyBuffer_Release(&b);
+            Py_DECREF(seq);
+            return NULL;
+        }
+        const uint8_t *p = (const uint8_t *)b.buf;
+        for (Py_ssize_t k = 0; k < b.len; k += 16) {
+            uint64_t t;
+            memcpy(&t, p + k, sizeof t);
+            earliest = t < earliest ? t : earliest;
+            latest = t > latest ? t : latest;
+            any = 1;
+        }
+        PyBuffer_Release(&b);
+    }
+    Py_DECREF(seq);
+    if (!any) {
+        PyErr_SetString(PyExc_ValueError, "index_span: no (time, offset) pair");
+        return NULL;
+    }
+    return Py_BuildValue("(KK)", (unsigned long long)earliest, (unsigned long long)latest);
+}
+
 /* ------------------------------------------------------------------ module */
 
 static PyMethodDef module_methods[] = {
@@ -2117,6 +2165,7 @@ static PyMethodDef module_methods[] = {
     {"exchange_sample", (PyCFunction)(void (*)(void))mod_exchange_sample, METH_FASTCALL, exchange_sample_doc},
     {"exchange_periods", (PyCFunction)(void (*)(void))mod_exchange_periods, METH_FASTCALL, exchange_periods_doc},
     {"records_into", (PyCFunction)(void (*)(void))mod_records_into, METH_FASTCALL, records_into_doc},
+    {"index_span", (PyCFunction)mod_index_span, METH_O, index_span_doc},
     {"stage_period", (PyCFunction)(void (*)(void))mod_stage_period, METH_FASTCALL, stage_period_doc},
     {"stage_telemetry", (PyCFunction)(void (*)(void))mod_stage_telemetry, METH_FASTCALL, stage_telemetry_doc},
     {NULL, NULL, 0, NULL},
