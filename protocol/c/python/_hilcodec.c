@@ -2044,11 +2044,12 @@ static PyObject *mod_records_into(PyObject *self, PyObject *const *args, Py_ssiz
     const double *v = (const double *)values.buf;
     /* The fields grouped by code once, so that each row is a few tight loops (a 'd' or 'f'
      * field is one conversion and one store) instead of a switch a value; every double fits
-     * a 'd' field, so only the other codes are checked. */
-    Py_ssize_t by_code[6][64], n_by_code[6] = {0, 0, 0, 0, 0, 0};
-    static const char order[] = "dfIiQq";
+     * a 'd' field, so only the other codes are checked. 'I' and 'i' share a group: a checked
+     * value of either is a whole number within int64_t, whose low 32 bits are the field. */
+    Py_ssize_t by_code[5][64], n_by_code[5] = {0, 0, 0, 0, 0};
+    static const char order[] = "dfIQq";
     for (Py_ssize_t i = 0; i < width; i++) {
-        Py_ssize_t c = strchr(order, code[i]) - order;
+        Py_ssize_t c = strchr(order, code[i] == 'i' ? 'I' : code[i]) - order;
         by_code[c][n_by_code[c]++] = i;
     }
     Py_ssize_t checked[64], n_checked = 0;
@@ -2083,20 +2084,16 @@ static PyObject *mod_records_into(PyObject *self, PyObject *const *args, Py_ssiz
             float f = (float)row[i];
             memcpy(p + off[i], &f, 4);
         }
-        for (Py_ssize_t j = 0; j < n_by_code[2]; j++) {         /* 'I' */
+        for (Py_ssize_t j = 0; j < n_by_code[2]; j++) {         /* 'I' and 'i' */
             Py_ssize_t i = by_code[2][j];
-            put_le(p + off[i], (uint32_t)row[i], 4);
+            put_le(p + off[i], (uint32_t)(int64_t)row[i], 4);
         }
-        for (Py_ssize_t j = 0; j < n_by_code[3]; j++) {         /* 'i' */
+        for (Py_ssize_t j = 0; j < n_by_code[3]; j++) {         /* 'Q' */
             Py_ssize_t i = by_code[3][j];
-            put_le(p + off[i], (uint32_t)(int32_t)row[i], 4);
-        }
-        for (Py_ssize_t j = 0; j < n_by_code[4]; j++) {         /* 'Q' */
-            Py_ssize_t i = by_code[4][j];
             put_le(p + off[i], (uint64_t)row[i], 8);
         }
-        for (Py_ssize_t j = 0; j < n_by_code[5]; j++) {         /* 'q' */
-            Py_ssize_t i = by_code[5][j];
+        for (Py_ssize_t j = 0; j < n_by_code[4]; j++) {         /* 'q' */
+            Py_ssize_t i = by_code[4][j];
             put_le(p + off[i], (uint64_t)(int64_t)row[i], 8);
         }
     }
