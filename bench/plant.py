@@ -160,6 +160,13 @@ def _timed_ns(fn, n: int) -> int:
     return time.perf_counter_ns() - t0
 
 
+def _fresh_batch_ns(name: str, inputs: dict, n: int) -> int:
+    """n periods of scenario `name` on a fresh plant, after REWARM_STEPS untimed ones, in ns."""
+    fn = _scenario(name, inputs)[1]
+    fn(REWARM_STEPS)
+    return _timed_ns(fn, n)
+
+
 class _PurePython:
     """The child process running the scenarios on the pure-Python path, one call at a time."""
 
@@ -234,9 +241,7 @@ def _medians_us(name: str, inputs: dict, child: _PurePython | None, batches: int
     here, there = [], []
 
     def local():
-        fn = _scenario(name, inputs)[1]
-        fn(REWARM_STEPS)
-        here.append(_timed_ns(fn, n) / n / 1000.0)
+        here.append(_fresh_batch_ns(name, inputs, n) / n / 1000.0)
 
     def remote():
         child.fresh(name)
@@ -259,11 +264,8 @@ def _paired_ratio(name: str, inputs: dict, pairs: int, n: int) -> float:
     (three runs of 2026-11-26: 1.94, 1.60 and 0.93 for plain DUTY)."""
     ratios = []
     for b in range(pairs):
-        timed = {}
-        for scenario in ((name, "gates_with_sensors") if b % 2 else ("gates_with_sensors", name)):
-            fn = _scenario(scenario, inputs)[1]
-            fn(REWARM_STEPS)
-            timed[scenario] = _timed_ns(fn, n)
+        timed = {scenario: _fresh_batch_ns(scenario, inputs, n)
+                 for scenario in ((name, "gates_with_sensors") if b % 2 else ("gates_with_sensors", name))}
         ratios.append(timed[name] / timed["gates_with_sensors"])
     return statistics.median(ratios)
 
