@@ -11,6 +11,15 @@ paired with gate-word batches, _paired_ratio), and
 DUTY at low speed with small currents, with and without dead time: the regime where dead time
 costs most (the currents cross zero within the period).
 
+Paired figures: every figure derived from two timings is the median over pairs of batches
+timed back to back, never a difference or ratio of two medians (on this 2-core VM medians
+timed minutes apart drift by 10-60 %): the `ratio_*` figures and `us_sensors` (gate words
+with sensors minus without, _paired_difference), on both paths, each from `ratio_pairs`
+pairs of `ratio_steps` periods; and `pure_python.ratio_to_c`, the median over the rounds of
+each row's Python batch over the C batch beside it. The other `us_*` figures are plain
+medians of one scenario each (`steps_per_second` and `realtime_fraction` derive from
+`us_per_step` alone).
+
 Every batch starts on a fresh plant in its scenario's initial state (built untimed) and runs
 REWARM_STEPS untimed periods before its timed ones, so every batch times the same stretch of
 the scenario: the first REWARM_STEPS + n periods from its initial state (the rated-speed
@@ -22,8 +31,11 @@ comparable with these.
 
 `pure_python` repeats every scenario on the pure-Python path (HIL_PLANT_PURE_PYTHON=1, the
 reference and fallback of the C kernel plant_rt/c/_plantnet.c), in a child process since the
-kernel is chosen at import: its figures, their own ratios to its gate-word figure, and
-`ratio_to_c`, each scenario's pure-Python median over the C one. The two processes take
+kernel is chosen at import: its figures, its own `us_sensors` and ratios to its gate-word
+figure (paired inside the child: the `paired` verb of its protocol runs _paired_difference
+and _paired_ratio there, so both batches of a pair are timed in the child with no pipe
+round trip between them), and `ratio_to_c`, for each scenario the median over the rounds of
+the pure-Python batch's time over the C batch's of the same round. The two processes take
 turns batch by batch (the parent waits while the child runs; which goes first alternates), so
 drift in the machine's load falls on both alike, and the two plants of a batch make the same
 calls in the same order: they follow the same trajectory, only the code differs. The untimed
@@ -205,6 +217,12 @@ class _PurePython:
         self._send(f"time {n}")
         return int(self._receive())
 
+    def paired(self, how: str, name: str, pairs: int, n: int) -> float:
+        """_paired_ratio (how "ratio") or _paired_difference (how "difference") of scenario
+        `name`, run inside the child: both batches of every pair timed there, back to back."""
+        self._send(f"paired {how} {name} {pairs} {n}")
+        return float(self._receive())
+
     def close(self) -> None:
         if self.proc.poll() is None:
             self.proc.stdin.close()
@@ -213,26 +231,32 @@ class _PurePython:
 
 def _child() -> None:
     """The child's side of _PurePython: `fresh NAME` builds the scenario's plant, `time N`
-    answers the ns that N periods of it took."""
+    answers the ns that N periods of it took, `paired HOW NAME PAIRS N` answers
+    _paired_ratio (HOW "ratio") or _paired_difference (HOW "difference") of NAME."""
     inputs = _inputs(int(sys.stdin.readline()))
     on_c = ckernel.KERNEL is not None or _plant().c_kernel
     print(json.dumps({"kernel": "c" if on_c else "python"}), flush=True)
     fn = None
+    paired = {"ratio": _paired_ratio, "difference": _paired_difference}
     for line in sys.stdin:
-        verb, arg = line.split()
+        verb, *args = line.split()
         if verb == "fresh":
-            fn = _scenario(arg, inputs)[1]
+            fn = _scenario(args[0], inputs)[1]
             print("ok", flush=True)
+        elif verb == "paired":
+            how, name, pairs, n = args
+            print(repr(paired[how](name, inputs, int(pairs), int(n))), flush=True)
         else:
-            print(_timed_ns(fn, int(arg)), flush=True)
+            print(_timed_ns(fn, int(args[0])), flush=True)
 
 
 def _medians_us(name: str, inputs: dict, child: _PurePython | None, batches: int, n: int):
     """Median us per period over batches of n periods of scenario `name`, here and (when there
     is a child) on the Python path, the two taking turns batch by batch (which goes first
-    alternates). Every batch starts on a fresh plant in the scenario's initial state, and runs
-    REWARM_STEPS untimed periods before its timed n, so every batch times the same stretch of
-    the scenario's trajectory."""
+    alternates), and the median over the rounds of the Python batch's time over the C batch's
+    of the same round (None without a child). Every batch starts on a fresh plant in the
+    scenario's initial state, and runs REWARM_STEPS untimed periods before its timed n, so
+    every batch times the same stretch of the scenario's trajectory."""
     warm = max(100, n // 10)                       # warm up (caches, noise blocks)
     _scenario(name, inputs)[1](warm)
     if child is not None:
@@ -253,32 +277,53 @@ def _medians_us(name: str, inputs: dict, child: _PurePython | None, batches: int
             if part is remote and child is None:
                 continue
             part()
-    return statistics.median(here), (statistics.median(there) if there else None)
+    if not there:
+        return statistics.median(here), None, None
+    return (statistics.median(here), statistics.median(there),
+            statistics.median(py / c for c, py in zip(here, there)))
 
 
-def _paired_ratio(name: str, inputs: dict, pairs: int, n: int) -> float:
-    """Issue 14's ratio for scenario `name`: the median over `pairs` of (its us per period)
-    over (the gate-word row's, gates_with_sensors), the two batches of a pair run one after
-    the other (which goes first alternates), each on a fresh plant after REWARM_STEPS untimed
-    periods. A ratio of two medians timed minutes apart followed the machine's load instead
-    (three runs of 2026-11-26: 1.94, 1.60 and 0.93 for plain DUTY)."""
-    ratios = []
+def _paired_ns(name: str, base: str, inputs: dict, pairs: int, n: int) -> list:
+    """`pairs` pairs (ns of scenario `name`, ns of scenario `base`), n periods each, the two
+    batches of a pair run one after the other (which goes first alternates), each on a fresh
+    plant after REWARM_STEPS untimed periods (_fresh_batch_ns)."""
+    out = []
     for b in range(pairs):
         timed = {scenario: _fresh_batch_ns(scenario, inputs, n)
-                 for scenario in ((name, "gates_with_sensors") if b % 2 else ("gates_with_sensors", name))}
-        ratios.append(timed[name] / timed["gates_with_sensors"])
-    return statistics.median(ratios)
+                 for scenario in ((name, base) if b % 2 else (base, name))}
+        out.append((timed[name], timed[base]))
+    return out
 
 
-def _with_ratios(us: dict) -> dict:
+def _paired_ratio(name: str, inputs: dict, pairs: int, n: int,
+                  base: str = "gates_with_sensors") -> float:
+    """Issue 14's ratio for scenario `name`: the median over `pairs` of (its us per period)
+    over (scenario `base`'s, by default the gate-word row's), the two batches of a pair run
+    one after the other (_paired_ns). A ratio of two medians timed minutes apart followed the
+    machine's load instead (three runs of 2026-11-26: 1.94, 1.60 and 0.93 for plain DUTY)."""
+    return statistics.median(t / t_base for t, t_base in _paired_ns(name, base, inputs, pairs, n))
+
+
+def _paired_difference(name: str, inputs: dict, pairs: int, n: int,
+                       base: str = "gates_only") -> float:
+    """The median over `pairs` of (scenario `name`'s us per period) minus (scenario `base`'s),
+    paired as in _paired_ratio: `us_sensors` is gates_with_sensors minus gates_only. The
+    difference of two medians timed apart came out negative (-0.159 us, 2026-11-26)."""
+    return statistics.median((t - t_base) / n / 1000.0
+                             for t, t_base in _paired_ns(name, base, inputs, pairs, n))
+
+
+def _with_ratios(us: dict, us_sensors: float, paired: dict) -> dict:
+    """The pure-Python figures: its row medians `us`, its paired `us_sensors` and its paired
+    ratios `paired` (ratio key -> ratio), rounded as the C ones."""
     gate = us["us_per_step"]
     out = {"us_per_step": round(gate, 3), "steps_per_second": round(1e6 / gate)}
     out["us_step_only"] = round(us["us_step_only"], 3)
-    out["us_sensors"] = round(gate - us["us_step_only"], 3)
+    out["us_sensors"] = round(us_sensors, 3)
     for key, _, _ in ROWS[2:]:
         out[key] = round(us[key], 3)
-    for ratio, key in RATIOS:
-        out[ratio] = round(us[key] / gate, 2)
+    for ratio, _ in RATIOS:
+        out[ratio] = round(paired[ratio], 2)
     return out
 
 
@@ -297,19 +342,28 @@ def run(quick: bool = False) -> dict:
                   + (ckernel.UNAVAILABLE_REASON or "HIL_PLANT_PURE_PYTHON is set"))
     else:
         child = _PurePython(per_batch)
-    us, us_py = {}, {}
+    # Every figure derived from two scenarios' times is paired: `pairs` pairs of `pair_n`
+    # periods, the two batches of a pair back to back (_paired_ns), the median of the pairs'
+    # ratios or differences. Issue 14's ratios (and the low-speed one beside them) pair each
+    # row with the gate words; us_sensors pairs the gate words with and without sensors.
+    pairs, pair_n = (5, 200) if quick else (15, 1000)
+    us, us_py, py_over_c = {}, {}, {}
+    py_sensors, py_paired = None, {}
     try:
         for key, name, slow in ROWS:
-            us[key], us_py[key] = _medians_us(name, inputs, child,
-                                              slow_batches if slow else batches,
-                                              slow_n if slow else per_batch)
+            us[key], us_py[key], py_over_c[key] = _medians_us(name, inputs, child,
+                                                              slow_batches if slow else batches,
+                                                              slow_n if slow else per_batch)
+        if child is not None:
+            # the pure-Python path's own paired figures, both batches of a pair in the child
+            py_sensors = child.paired("difference", "gates_with_sensors", pairs, pair_n)
+            py_paired = {ratio: child.paired("ratio", SCENARIO_OF[key], pairs, pair_n)
+                         for ratio, key in RATIOS}
     finally:
         if child is not None:
             child.close()
 
-    # Issue 14's ratios (and the low-speed one beside them), each from batches paired with
-    # gate-word batches of the same length
-    pairs, pair_n = (5, 200) if quick else (15, 1000)
+    us_sensors = _paired_difference("gates_with_sensors", inputs, pairs, pair_n)
     paired = {ratio: round(_paired_ratio(SCENARIO_OF[key], inputs, pairs, pair_n), 2)
               for ratio, key in RATIOS}
 
@@ -321,7 +375,8 @@ def run(quick: bool = False) -> dict:
         "period_s": period_s,
         "realtime_fraction": round(gate * 1e-6 / period_s, 4),
         "us_step_only": round(us["us_step_only"], 3),
-        "us_sensors": round(gate - us["us_step_only"], 3),
+        # paired: the median of the pairs' differences (_paired_difference)
+        "us_sensors": round(us_sensors, 3),
         "us_truth": round(us["us_truth"], 3),
         "us_per_step_duty": round(us["us_per_step_duty"], 3),
         "us_per_step_duty_dead_time_1us": round(us["us_per_step_duty_dead_time_1us"], 3),
@@ -349,7 +404,7 @@ def run(quick: bool = False) -> dict:
     if child is None:
         figures["pure_python"] = {"absent": absent}
     else:
-        pure = _with_ratios(us_py)
-        pure["ratio_to_c"] = {key: round(us_py[key] / us[key], 2) for key, _, _ in ROWS}
+        pure = _with_ratios(us_py, py_sensors, py_paired)
+        pure["ratio_to_c"] = {key: round(py_over_c[key], 2) for key, _, _ in ROWS}
         figures["pure_python"] = pure
     return figures
