@@ -20,6 +20,11 @@ from hil.session.bench_session import BenchSession, SessionConfig
 
 LINKS = ("stub", "stub-pty", "stub-can")
 
+# The shortest plan a check can read (two 50 us periods): hil_run_startup, startup_side_by_side.
+TWO_PERIOD_PLAN = ("name: two-periods\nsteps:\n  - run: {duration_s: 100.0e-6}\n"
+                   "  - check: {name: ran, kind: final_value, signal: plant.speed_rpm, "
+                   "limits: {low: -1, high: 1, unit: rpm}}\n")
+
 
 def lockstep_rate(link: str, log: bool, periods: int, batches: int,
                   controller: dict | None = None) -> dict:
@@ -118,13 +123,10 @@ def hil_run_startup(runs: int) -> dict:
     import subprocess
     import sys
 
-    plan = ("name: two-periods\nsteps:\n  - run: {duration_s: 100.0e-6}\n"
-            "  - check: {name: ran, kind: final_value, signal: plant.speed_rpm, "
-            "limits: {low: -1, high: 1, unit: rpm}}\n")
     times = []
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "one.yaml"
-        path.write_text(plan)
+        path.write_text(TWO_PERIOD_PLAN)
         for i in range(runs + 1):
             t0 = time.perf_counter()
             hil = Path(sys.executable).with_name("hil")     # the console script users run
@@ -137,6 +139,65 @@ def hil_run_startup(runs: int) -> dict:
                 return {"error": proc.stderr[-500:]}
     return {"median_s": round(statistics.median(times), 3), "runs": runs,
             "min_s": round(min(times), 3), "max_s": round(max(times), 3)}
+
+
+def startup_side_by_side(runs: int) -> dict:
+    """Two `hil run` of the two-period plan started together, with OpenBLAS at hil's default
+    of one thread (OPENBLAS_NUM_THREADS unset in the children: `import hil` sets it to 1) and
+    at OpenBLAS's own default (OPENBLAS_NUM_THREADS = os.cpu_count(), which hil leaves alone):
+    the README's case for the one-thread default. Rounds alternate the two settings; each
+    process's wall time (start to exit) is timed on its own thread. Medians over `runs` rounds
+    (two processes a round) of each, and of the pair's wall time (until both exit); one warm-up
+    round of each is not counted."""
+    import os
+    import subprocess
+    import sys
+    import threading
+
+    hil = Path(sys.executable).with_name("hil")     # the console script users run
+    base = {k: v for k, v in os.environ.items() if k not in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")}
+    envs = {"one_blas_thread": base,
+            "openblas_default": {**base, "OPENBLAS_NUM_THREADS": str(os.cpu_count() or 1)}}
+    times: dict[str, list[float]] = {k: [] for k in envs}
+    pairs: dict[str, list[float]] = {k: [] for k in envs}
+    errors: list[str] = []
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "one.yaml"
+        path.write_text(TWO_PERIOD_PLAN)
+        n = 0
+
+        def one(env: dict, out: list, slot: int) -> None:
+            t0 = time.perf_counter()
+            proc = subprocess.run([str(hil), "run", str(path), "--out", str(Path(tmp) / f"out{n}_{slot}"),
+                                   "--no-progress"], env=env, capture_output=True, text=True)
+            out[slot] = time.perf_counter() - t0
+            if proc.returncode not in (0, 1):
+                errors.append(proc.stderr[-500:])
+
+        for r in range(runs + 1):
+            for key, env in envs.items():
+                n += 1
+                got = [0.0, 0.0]
+                threads = [threading.Thread(target=one, args=(env, got, i)) for i in range(2)]
+                t0 = time.perf_counter()
+                for t in threads:
+                    t.start()
+                for t in threads:
+                    t.join()
+                pair = time.perf_counter() - t0
+                if errors:
+                    return {"error": errors[0]}
+                if r:                               # the first round warms the page cache
+                    times[key].extend(got)
+                    pairs[key].append(pair)
+    out: dict = {"rounds": runs, "cpu_count": os.cpu_count()}
+    for key in envs:
+        out[key] = {"median_s": round(statistics.median(times[key]), 3),
+                    "pair_median_s": round(statistics.median(pairs[key]), 3),
+                    "min_s": round(min(times[key]), 3), "max_s": round(max(times[key]), 3)}
+    out["openblas_default_vs_one_thread"] = round(
+        statistics.median(times["openblas_default"]) / statistics.median(times["one_blas_thread"]), 3)
+    return out
 
 
 def stub_pty_vs_bare(hold_cpu_latency: bool, periods: int, batches: int) -> dict:
@@ -208,6 +269,8 @@ def run(quick: bool = False) -> dict:
     out["lockstep"]["stub, stub+log, plant_only interleaved"] = interleaved
     out["lockstep"]["stub+log_vs_plant_only"] = interleaved["stub+log_vs_plant_only"]
     out["hil_run_startup"] = hil_run_startup(3 if quick else 7)
+    # Two `hil run` side by side, OpenBLAS at hil's one thread and at its own default.
+    out["hil_run_side_by_side_openblas"] = startup_side_by_side(2 if quick else 5)
     # TELEMETRY is 8 classic CAN frames, each read a byte at a time by python-can's slcan:
     # the rate a CAN profile gets with telemetry_divider 10 in its controller section.
     try:
