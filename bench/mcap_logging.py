@@ -14,7 +14,8 @@ Timed, each on a fresh log over the same rows, variants interleaved `repeats` ti
   every period, so the full-rate channels go to the log in batches of
   `LOG_BATCH_PERIODS` through `FixedChannel.write_many`; with lz4 64 KiB chunks (the
   default, at the writer's `LZ4_LEVEL`), lz4 1 MiB, lz4 64 KiB at the lz4 library's own
-  default level 0 (``lz4_level0_64KiB``), zstd 64 KiB and no compression. The in-memory lists the recorder
+  default level 0 (``lz4_level0_64KiB``) and at -2 (``lz4_level-2_64KiB``, the writer's level
+  before 2026-11-26), zstd 64 KiB and no compression. The in-memory lists the recorder
   keeps for the checks are part of the cost (they are there with or without a log).
 - ``numpy_packing_lz4_64KiB``: the default variant with the records packed by numpy column by
   column (`FixedChannel.write_many` without the C codec's `records_into`), as before it.
@@ -58,7 +59,7 @@ from protocol.messages import Telemetry
 
 #: (compression, chunk size, lz4 level or None: the writer's default, LZ4_LEVEL)
 VARIANTS = (("lz4", 64 * 1024, None), ("lz4", 1024 * 1024, None), ("lz4", 64 * 1024, 0),
-            ("zstd", 64 * 1024, None), ("none", 64 * 1024, None))
+            ("lz4", 64 * 1024, -2), ("zstd", 64 * 1024, None), ("none", 64 * 1024, None))
 
 
 def _variant_name(compression: str, chunk_size: int, lz4_level: int | None) -> str:
