@@ -33,7 +33,8 @@ from protocol.messages import MESSAGE_CLASSES
 
 BUILD_DIR = Path(__file__).resolve().parent / "c" / "build"
 _API = ("FrameEncoder", "StreamDecoder", "encode_frame", "crc16", "exchange_sample",
-        "exchange_periods", "records_into", "stage_period", "stage_telemetry", "index_span")
+        "exchange_periods", "records_into", "stage_period", "stage_telemetry", "index_span",
+        "chunk_tail")
 
 
 def extension_path() -> Path:
@@ -81,6 +82,7 @@ else:
     stage_period = getattr(_ext, "stage_period", None)
     stage_telemetry = getattr(_ext, "stage_telemetry", None)
     index_span = getattr(_ext, "index_span", None)
+    chunk_tail = getattr(_ext, "chunk_tail", None)
 
 
 def __getattr__(name: str):

@@ -62,6 +62,10 @@ _RECORDS_INTO = ccodec.records_into if ccodec.AVAILABLE else None
 #: The chunk's time span from its message indexes in one C call (protocol.ccodec.index_span),
 #: where numpy's took two reductions a channel, about 45 us a chunk; None: numpy's.
 _INDEX_SPAN = ccodec.index_span if ccodec.AVAILABLE else None
+#: The records after a chunk (its MessageIndexes and its ChunkIndex) in one C call
+#: (protocol.ccodec.chunk_tail), where Python built them a channel at a time; None: Python's
+#: (McapLog._chunk_tail, the reference: the same bytes).
+_CHUNK_TAIL = ccodec.chunk_tail if ccodec.AVAILABLE else None
 
 # Message record prefix: opcode, record length, channel id, sequence, log time, publish time.
 _MESSAGE_PREFIX = "<BQHIQQ"
@@ -486,6 +490,27 @@ def crc32(data: bytes | bytearray | memoryview, value: int = 0) -> int:
 LZ4_LEVEL = -3
 
 
+def _chunk_tail(active: list, chunk_start: int, chunk_length: int, start: int, end: int,
+                compression: str, compressed_size: int, uncompressed_size: int) -> tuple[bytes, bytes]:
+    """The MessageIndex records of a chunk's `active` channels, written right after it, and
+    its ChunkIndex record: protocol.ccodec.chunk_tail's reference."""
+    parts = []
+    offsets = {}
+    index_pos = chunk_start + chunk_length
+    for c in active:
+        idx = c._index
+        n = len(idx) // 2
+        offsets[c.channel_id] = index_pos
+        record = (rec.HEAD.pack(rec.MESSAGE_INDEX, 6 + 16 * n)
+                  + struct.pack("<HI", c.channel_id, 16 * n) + _little_endian(idx))
+        parts.append(record)
+        index_pos += len(record)
+    chunk_index = rec.chunk_index(start, end, chunk_start, chunk_length, offsets,
+                                  index_pos - chunk_start - chunk_length, compression,
+                                  compressed_size, uncompressed_size)
+    return b"".join(parts), chunk_index
+
+
 class McapLog:
     """Writer of one run's MCAP file.
 
@@ -735,24 +760,19 @@ class McapLog:
         chunk_record = rec.HEAD.pack(rec.CHUNK, len(body_head) + len(data)) + body_head
         chunk_start = self._pos
         chunk_length = len(chunk_record) + len(data)
-        parts = [chunk_record, data]
-        offsets = {}
-        index_pos = chunk_start + chunk_length
+        tail = (chunk_start, chunk_length, start, end, self.compression, len(data), fill)
+        if _CHUNK_TAIL is not None:
+            indexes, chunk_index = _CHUNK_TAIL([c.channel_id for c in active],
+                                               [c._index for c in active], *tail)
+        else:
+            indexes, chunk_index = _chunk_tail(active, *tail)
+        counts = self._message_counts
         for c in active:
-            idx = c._index
-            n = len(idx) // 2
-            offsets[c.channel_id] = index_pos
-            record = (rec.HEAD.pack(rec.MESSAGE_INDEX, 6 + 16 * n)
-                      + struct.pack("<HI", c.channel_id, 16 * n) + _little_endian(idx))
-            parts.append(record)
-            index_pos += len(record)
-            self._message_counts[c.channel_id] = self._message_counts.get(c.channel_id, 0) + n
+            counts[c.channel_id] = counts.get(c.channel_id, 0) + len(c._index) // 2
             c._index = _new_index()
         chunk.fill = 0
-        self._write(b"".join(parts))
-        self._chunk_indexes.append(rec.chunk_index(
-            start, end, chunk_start, chunk_length, offsets, index_pos - chunk_start - chunk_length,
-            self.compression, len(data), fill))
+        self._write(b"".join((chunk_record, data, indexes)))
+        self._chunk_indexes.append(chunk_index)
         if self._time_range is None:
             self._time_range = (start, end)
         else:

@@ -2153,6 +2153,149 @@ static PyObject *mod_index_span(PyObject *self, PyObject *arg)
     return Py_BuildValue("(KK)", (unsigned long long)earliest, (unsigned long long)latest);
 }
 
+PyDoc_STRVAR(chunk_tail_doc,
+"chunk_tail(channel_ids, indexes, chunk_start, chunk_length, start, end, compression,\n"
+"           compressed_size, uncompressed_size) -> (message_indexes, chunk_index)\n\n"
+"The records that follow a finished chunk (hil/logs/mcap_writer.py McapLog._finish_chunk),\n"
+"byte for byte what hil.logs.mcap_records writes: `message_indexes`, one MessageIndex record\n"
+"(opcode 0x07) a channel, in the order given, written right after the chunk, and\n"
+"`chunk_index`, its ChunkIndex record (0x08) for the summary, with each MessageIndex's file\n"
+"offset. `indexes` are buffers of native uint64, each one channel's (log time, offset in the\n"
+"chunk) pairs interleaved; `channel_ids` their channel ids (uint16). ValueError when the two\n"
+"differ in length, a buffer is not whole pairs, an id is not a uint16 or a size is negative.");
+
+static PyObject *mod_chunk_tail(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    (void)self;
+    if (nargs != 9) {
+        PyErr_SetString(PyExc_TypeError, "chunk_tail: 9 arguments");
+        return NULL;
+    }
+    unsigned long long num[6];         /* chunk_start, chunk_length, start, end, compressed, uncompressed */
+    const int num_arg[6] = {2, 3, 4, 5, 7, 8};
+    for (int i = 0; i < 6; i++) {
+        num[i] = PyLong_AsUnsignedLongLong(args[num_arg[i]]);
+        if (num[i] == (unsigned long long)-1 && PyErr_Occurred()) {
+            PyErr_Clear();
+            PyErr_Format(PyExc_ValueError, "chunk_tail: argument %d is not a uint64", num_arg[i] + 1);
+            return NULL;
+        }
+    }
+    Py_ssize_t comp_len;
+    const char *comp = PyUnicode_AsUTF8AndSize(args[6], &comp_len);
+    if (comp == NULL) {
+        return NULL;
+    }
+    PyObject *ids = PySequence_Fast(args[0], "chunk_tail: channel_ids is a sequence");
+    if (ids == NULL) {
+        return NULL;
+    }
+    PyObject *idx = PySequence_Fast(args[1], "chunk_tail: indexes is a sequence");
+    if (idx == NULL) {
+        Py_DECREF(ids);
+        return NULL;
+    }
+    PyObject *result = NULL, *records = NULL, *chunk_index = NULL;
+    Py_ssize_t n = PySequence_Fast_GET_SIZE(ids);
+    Py_buffer *bufs = NULL;
+    Py_ssize_t got = 0;
+    uint16_t *id16 = NULL;
+    if (PySequence_Fast_GET_SIZE(idx) != n) {
+        PyErr_Format(PyExc_ValueError, "chunk_tail: %zd channel ids for %zd indexes", n,
+                     PySequence_Fast_GET_SIZE(idx));
+        goto done;
+    }
+    bufs = PyMem_New(Py_buffer, (size_t)(n ? n : 1));
+    id16 = PyMem_New(uint16_t, (size_t)(n ? n : 1));
+    if (bufs == NULL || id16 == NULL) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    Py_ssize_t total = 0;
+    for (; got < n; got++) {
+        long id = PyLong_AsLong(PySequence_Fast_GET_ITEM(ids, got));
+        if (id < 0 || id > 0xFFFF) {
+            if (!PyErr_Occurred() || PyErr_ExceptionMatches(PyExc_OverflowError) ||
+                PyErr_ExceptionMatches(PyExc_TypeError)) {
+                PyErr_Clear();
+                PyErr_Format(PyExc_ValueError, "chunk_tail: channel id %zd is not a uint16", got);
+            }
+            goto done;
+        }
+        id16[got] = (uint16_t)id;
+        if (PyObject_GetBuffer(PySequence_Fast_GET_ITEM(idx, got), &bufs[got], PyBUF_C_CONTIGUOUS) < 0) {
+            goto done;
+        }
+        if (bufs[got].len % 16 != 0) {
+            PyErr_Format(PyExc_ValueError, "chunk_tail: index %zd holds %zd bytes, not whole (time, offset) "
+                         "pairs of uint64", got, bufs[got].len);
+            got++;
+            goto done;
+        }
+        total += 9 + 6 + bufs[got].len;
+    }
+    /* MessageIndex records: opcode, u64 length, u16 channel, u32 pairs' bytes, the pairs (LE) */
+    records = PyBytes_FromStringAndSize(NULL, total);
+    /* ChunkIndex: opcode, u64 length, 4 x u64, u32 map bytes + n x (u16, u64), u64,
+       u32 + compression, 2 x u64 */
+    Py_ssize_t ci_body = 32 + 4 + 10 * n + 8 + 4 + comp_len + 16;
+    chunk_index = PyBytes_FromStringAndSize(NULL, 9 + ci_body);
+    if (records == NULL || chunk_index == NULL) {
+        goto done;
+    }
+    uint8_t *r = (uint8_t *)PyBytes_AS_STRING(records);
+    uint8_t *c = (uint8_t *)PyBytes_AS_STRING(chunk_index);
+    c[0] = 0x08;
+    put_le(c + 1, (uint64_t)ci_body, 8);
+    put_le(c + 9, num[2], 8);
+    put_le(c + 17, num[3], 8);
+    put_le(c + 25, num[0], 8);
+    put_le(c + 33, num[1], 8);
+    put_le(c + 41, (uint64_t)(10 * n), 4);
+    uint8_t *map = c + 45;
+    uint64_t offset = (uint64_t)num[0] + (uint64_t)num[1];
+    for (Py_ssize_t i = 0; i < n; i++) {
+        Py_ssize_t len = bufs[i].len;
+        put_le(map + 10 * i, id16[i], 2);
+        put_le(map + 10 * i + 2, offset, 8);
+        r[0] = 0x07;
+        put_le(r + 1, (uint64_t)(6 + len), 8);
+        put_le(r + 9, id16[i], 2);
+        put_le(r + 11, (uint64_t)len, 4);
+        const uint8_t *src = (const uint8_t *)bufs[i].buf;
+        uint8_t *dst = r + 15;
+#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__
+        memcpy(dst, src, (size_t)len);      /* the host's order is the record's */
+#else
+        for (Py_ssize_t k = 0; k < len; k += 8) {
+            uint64_t v;
+            memcpy(&v, src + k, sizeof v);
+            put_le(dst + k, v, 8);
+        }
+#endif
+        r += 15 + len;
+        offset += (uint64_t)(15 + len);
+    }
+    uint8_t *t = map + 10 * n;
+    put_le(t, (uint64_t)total, 8);
+    put_le(t + 8, (uint64_t)comp_len, 4);
+    memcpy(t + 12, comp, (size_t)comp_len);
+    put_le(t + 12 + comp_len, num[4], 8);
+    put_le(t + 20 + comp_len, num[5], 8);
+    result = PyTuple_Pack(2, records, chunk_index);
+done:
+    for (Py_ssize_t i = 0; i < got; i++) {
+        PyBuffer_Release(&bufs[i]);
+    }
+    PyMem_Free(bufs);
+    PyMem_Free(id16);
+    Py_XDECREF(records);
+    Py_XDECREF(chunk_index);
+    Py_DECREF(ids);
+    Py_DECREF(idx);
+    return result;
+}
+
 /* ------------------------------------------------------------------ module */
 
 static PyMethodDef module_methods[] = {
@@ -2163,6 +2306,7 @@ static PyMethodDef module_methods[] = {
     {"exchange_periods", (PyCFunction)(void (*)(void))mod_exchange_periods, METH_FASTCALL, exchange_periods_doc},
     {"records_into", (PyCFunction)(void (*)(void))mod_records_into, METH_FASTCALL, records_into_doc},
     {"index_span", (PyCFunction)mod_index_span, METH_O, index_span_doc},
+    {"chunk_tail", (PyCFunction)(void (*)(void))mod_chunk_tail, METH_FASTCALL, chunk_tail_doc},
     {"stage_period", (PyCFunction)(void (*)(void))mod_stage_period, METH_FASTCALL, stage_period_doc},
     {"stage_telemetry", (PyCFunction)(void (*)(void))mod_stage_telemetry, METH_FASTCALL, stage_telemetry_doc},
     {NULL, NULL, 0, NULL},
