@@ -296,9 +296,11 @@ class FixedChannel:
 
     def write_many(self, log_times_ns, values) -> None:
         """Log len(log_times_ns) messages at once: `values` is a 2-D array (one row per
-        message, columns in the declared field order). The records are built column by column
-        with numpy and copied into the open chunk, so a message costs tens of nanoseconds
-        instead of a Python call; the chunk is finished whenever it fills, as with write()."""
+        message, columns in the declared field order). The records are packed in one C call
+        (protocol.ccodec.records_into: straight into the open chunk when the batch fits it,
+        else staged and copied) or, without it or for a value it does not take, built column by
+        column with numpy, so a message costs tens of nanoseconds instead of a Python call; the
+        chunk is finished whenever it fills, as with write()."""
         times = np.asarray(log_times_ns, dtype=np.uint64)
         n = times.shape[0]
         if n == 0:
@@ -307,6 +309,20 @@ class FixedChannel:
         if values.ndim != 2 or values.shape != (n, len(self.field_names)):
             raise ValueError(f"{self.topic}: expected {n} rows of {len(self.field_names)} values "
                              f"({', '.join(self.field_names)}), got shape {values.shape}")
+        if _RECORDS_INTO is not None and values.dtype == np.float64:
+            chunk = self._chunk
+            pos = chunk.fill
+            size = self.record_size
+            if n <= max(1, -(-(chunk.limit - pos) // size)) and self._packed_into(
+                    chunk.buf, pos, times, values):
+                # the whole batch fitted the open chunk (write()'s rule: it may end on or one
+                # record past the limit) and went straight into it, with no staging copy
+                end = pos + n * size
+                self._index_pairs(times, pos, end)
+                chunk.fill = end
+                if end >= chunk.limit:
+                    self._log._finish_chunk()
+                return
         raw = self._packed(times, values) if _RECORDS_INTO is not None else None
         if raw is None:
             records = np.repeat(self._template, n)
@@ -334,14 +350,37 @@ class FixedChannel:
             end = pos + take * size
             with memoryview(chunk.buf) as view:
                 view[pos:end] = raw[done * size:(done + take) * size]
-            pairs = np.empty((take, 2), dtype=np.uint64)
-            pairs[:, 0] = times[done:done + take]
-            pairs[:, 1] = np.arange(pos, end, size, dtype=np.uint64)
-            self._index.frombytes(pairs.tobytes())
+            self._index_pairs(times[done:done + take], pos, end)
             chunk.fill = end
             done += take
             if end >= chunk.limit:
                 log._finish_chunk()
+
+    def _index_pairs(self, times: np.ndarray, pos: int, end: int) -> None:
+        """The message index's (log time, offset) pairs of the records from `pos` to `end`."""
+        pairs = np.empty((len(times), 2), dtype=np.uint64)
+        pairs[:, 0] = times
+        pairs[:, 1] = np.arange(pos, end, self.record_size, dtype=np.uint64)
+        self._index.frombytes(pairs.tobytes())
+
+    def _record_layout(self) -> tuple[bytes, bytes, tuple[int, ...]]:
+        """records_into's description of a record: template bytes, struct codes, offsets."""
+        layout = self._layout
+        if layout is None:
+            template = self._template.tobytes()
+            codes = "".join(FIXED_TYPES[t][2] for t in self._field_types).encode()
+            offsets = tuple(self._dtype.fields[name][1] for name in self._value_names)
+            layout = self._layout = (template, codes, offsets)
+        return layout
+
+    def _packed_into(self, out, pos: int, times: np.ndarray, values: np.ndarray) -> bool:
+        """The float64 rows packed by records_into into `out` from byte `pos`; False, with
+        `out` untouched, when a value does not fit its field (the numpy path then names it)."""
+        try:
+            _RECORDS_INTO(out, pos, *self._record_layout(), times, np.ascontiguousarray(values))
+        except ValueError:
+            return False
+        return True
 
     def _packed(self, times: np.ndarray, values: np.ndarray) -> np.ndarray | None:
         """The records as bytes, built in one C call (protocol.ccodec.records_into: faster than
@@ -354,17 +393,7 @@ class FixedChannel:
         if values.dtype != np.float64:
             return None
         raw = np.empty(len(times) * self.record_size, dtype=np.uint8)
-        layout = self._layout
-        if layout is None:
-            template = self._template.tobytes()
-            codes = "".join(FIXED_TYPES[t][2] for t in self._field_types).encode()
-            offsets = tuple(self._dtype.fields[name][1] for name in self._value_names)
-            layout = self._layout = (template, codes, offsets)
-        try:
-            _RECORDS_INTO(raw, 0, *layout, times, np.ascontiguousarray(values))
-        except ValueError:
-            return None
-        return raw
+        return raw if self._packed_into(raw, 0, times, values) else None
 
     def _check_whole(self, block: np.ndarray) -> None:
         """The integer fields' values (as floats): whole, finite and in their types' ranges."""
