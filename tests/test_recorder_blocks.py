@@ -141,3 +141,47 @@ def test_the_c_row_writers_and_the_numpy_path_keep_the_same_rows(monkeypatch):
     monkeypatch.undo()
     with pytest.raises(ValueError, match="rows of 3 values"):
         Recorder(T).period(0, (1.0, 2.0, 3.0), _sample(0))
+
+
+def test_int_values_become_the_double_float_gives_them_on_both_paths(monkeypatch):
+    """The C row writer converts an int without a float object in between: the same double as
+    float(v), rounding included (2**53 + 1 and the like), for exact ints, bools and an int
+    subclass, and the same rows as numpy's path; an int beyond a double's range is refused
+    the same way on both (OverflowError)."""
+    import enum
+
+    from hil.logs import recorder as recorder_module
+
+    class Code(enum.IntEnum):
+        BIG = 2 ** 62 + 1
+
+    awkward = [2 ** 53 + 1, -(2 ** 62) - 3, 10 ** 20 + 1, True, Code.BIG, 7, -1, 0]
+
+    def truth(k):
+        row = list(_truth(k))
+        row[1:1 + len(awkward)] = awkward[k % 3:] + awkward[:k % 3]
+        return tuple(row)
+
+    def feed(rec):
+        for k in range(LOG_BATCH_PERIODS + 3):
+            s = _sample(k)
+            rec.period(k, truth(k), SimpleNamespace(adc_i1=awkward[k % len(awkward)], adc_i2=s.adc_i2,
+                                                    adc_vdc=s.adc_vdc, encoder=2 ** 53 + k, status=s.status))
+        return rec.truth_rows, rec.sensor_rows
+
+    with_c = feed(Recorder(T))
+    monkeypatch.setattr(recorder_module, "_STAGE_PERIOD", None)
+    without = feed(Recorder(T))
+    monkeypatch.undo()
+    for a, b in zip(with_c, without):
+        assert np.array_equal(a, b)
+    ks = range(LOG_BATCH_PERIODS + 3)
+    assert [float(v) for v in with_c[0][:, 1]] == [float(truth(k)[1]) for k in ks]
+    assert list(with_c[1][:, 0]) == [float(awkward[k % len(awkward)]) for k in ks]
+    assert list(with_c[1][:, 3]) == [float(2 ** 53 + k) for k in ks]
+    for writer_off in (False, True):
+        if writer_off:
+            monkeypatch.setattr(recorder_module, "_STAGE_PERIOD", None)
+        with pytest.raises(OverflowError):
+            Recorder(T).period(0, (10 ** 400,) + _truth(0)[1:], _sample(0))
+    monkeypatch.undo()

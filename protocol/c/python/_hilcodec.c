@@ -1380,6 +1380,12 @@ static int stage_seal_if_full(stage_t *st)
 static int value_of_other(PyObject *v, double *d, Py_ssize_t r, const msg_class *mc, const char *field,
                           Py_ssize_t i)
 {
+    if (v != NULL && PyLong_CheckExact(v)) {
+        /* the ADC counts, encoder, status and period: what float(v) gives, without the float
+           object PyFloat_AsDouble makes of an int */
+        *d = PyLong_AsDouble(v);
+        return (*d == -1.0 && PyErr_Occurred()) ? -1 : 0;
+    }
     if (v != NULL && (PyFloat_Check(v) || PyLong_Check(v))) {
         *d = PyFloat_AsDouble(v);
         return (*d == -1.0 && PyErr_Occurred()) ? -1 : 0;
