@@ -565,3 +565,22 @@ def test_a_log_of_full_chunks_passes_the_mcap_packages_crc_checks(tmp_path):
         messages = list(SeekingReader(f, validate_crcs=True).iter_messages())
     assert len(messages) == 20_000
     assert len(read_log(path)["/x"].fields["a"]) == 20_000
+
+
+def test_a_bytes_message_larger_than_the_chunk_buffer_and_a_bytearray_payload(tmp_path):
+    """A raw-frame batch is copied into the open chunk in place, growing the chunk's buffer only
+    for a message longer than it (here 3x the buffer, after a small one); the payload may be a
+    bytearray (the link tap's capture buffer) and is read back byte for byte."""
+    path = tmp_path / "big.mcap"
+    small = bytearray(range(7))
+    big = bytes((i * 7) % 251 for i in range(3 * (4096 + 64 * 1024)))
+    with McapLog(path, chunk_size=4096) as log:
+        frames = log.add_bytes_channel("/link/frames_in", "hil.FrameBatch")
+        frames.write(1_000, small, 2)
+        frames.write(2_000, big, 9)
+        frames.write(3_000, b"", 0)
+    with open(path, "rb") as f:
+        reader = SeekingReader(f, validate_crcs=True)
+        got = [(_message_class(s).FromString(m.data), m.log_time) for s, _, m in reader.iter_messages()]
+    assert [(bytes(msg.data), msg.count, t) for msg, t in got] == [
+        (bytes(small), 2, 1_000), (big, 9, 2_000), (b"", 0, 3_000)]

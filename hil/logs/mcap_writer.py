@@ -445,13 +445,19 @@ class _VariableChannel:
         self._chunk = log._open
         self._index = _new_index()
 
-    def _append(self, log_time_ns: int, payload: bytes) -> None:
+    def _append(self, log_time_ns: int, payload, head: bytes = b"") -> None:
+        """One message of `head` then `payload` (any bytes-like object: copied once, into
+        the chunk)."""
         chunk = self._chunk
         pos = chunk.fill
-        end = pos + _MESSAGE_PREFIX_LEN + len(payload)
+        end = pos + _MESSAGE_PREFIX_LEN + len(head) + len(payload)
+        prefix = _MESSAGE_PREFIX_STRUCT.pack(
+            rec.MESSAGE, end - pos - 9, self.channel_id, 0, log_time_ns, log_time_ns) + head
+        mid = pos + len(prefix)
         # slice assignment writes in place, growing the buffer only for an outsized message
-        chunk.buf[pos:end] = _MESSAGE_PREFIX_STRUCT.pack(
-            rec.MESSAGE, end - pos - 9, self.channel_id, 0, log_time_ns, log_time_ns) + payload
+        buf = chunk.buf
+        buf[pos:mid] = prefix
+        buf[mid:end] = payload
         chunk.fill = end
         index = self._index
         index.append(log_time_ns)
@@ -474,7 +480,7 @@ class BytesChannel(_VariableChannel):
             head = _BYTES_HEAD.pack(_BYTES_COUNT_TAG, count, _BYTES_DATA_TAG)
         except struct.error:
             raise ValueError(f"{self.topic}: count {count!r} is not a 32-bit unsigned integer") from None
-        self._append(log_time_ns, b"".join((head, _varint(len(data)), data)))
+        self._append(log_time_ns, data, head + _varint(len(data)))
 
 
 class JsonChannel(_VariableChannel):
