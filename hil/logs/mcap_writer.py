@@ -64,7 +64,7 @@ _RECORDS_INTO = ccodec.records_into if ccodec.AVAILABLE else None
 _INDEX_SPAN = ccodec.index_span if ccodec.AVAILABLE else None
 #: The records after a chunk (its MessageIndexes and its ChunkIndex) in one C call
 #: (protocol.ccodec.chunk_tail), where Python built them a channel at a time; None: Python's
-#: (McapLog._chunk_tail, the reference: the same bytes).
+#: (_chunk_tail below, the reference: the same bytes).
 _CHUNK_TAIL = ccodec.chunk_tail if ccodec.AVAILABLE else None
 
 # Message record prefix: opcode, record length, channel id, sequence, log time, publish time.
