@@ -132,7 +132,7 @@ def hil_run_startup(runs: int) -> dict:
             hil = Path(sys.executable).with_name("hil")     # the console script users run
             proc = subprocess.run([str(hil), "run", str(path),
                                    "--out", str(Path(tmp) / f"out{i}"), "--no-progress"],
-                                  capture_output=True, text=True)
+                                  capture_output=True, text=True, timeout=120)
             if i:                                   # the first run warms the page cache
                 times.append(time.perf_counter() - t0)
             if proc.returncode not in (0, 1):
@@ -169,7 +169,7 @@ def startup_side_by_side(runs: int) -> dict:
         def one(env: dict, out: list, slot: int) -> None:
             t0 = time.perf_counter()
             proc = subprocess.run([str(hil), "run", str(path), "--out", str(Path(tmp) / f"out{n}_{slot}"),
-                                   "--no-progress"], env=env, capture_output=True, text=True)
+                                   "--no-progress"], env=env, capture_output=True, text=True, timeout=120)
             out[slot] = time.perf_counter() - t0
             if proc.returncode not in (0, 1):
                 errors.append(proc.stderr[-500:])
