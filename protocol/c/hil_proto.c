@@ -481,24 +481,23 @@ int hil_payload_decode(uint8_t type, const uint8_t *p, size_t len, hil_msg *msg)
 /* ------------------------------------------------------------------ serial frames */
 
 /* COBS for inputs shorter than 254 bytes (frames are at most HIL_MAX_RAW_FRAME),
- * so no block reaches the 0xFF code. Writes n + 1 bytes and the 0x00 delimiter.
- * A block at a time, as the decoder reads them: memchr finds the next zero and memcpy
- * moves the bytes before it behind their code byte. */
+ * so no block reaches the 0xFF code. Writes n + 1 bytes and the 0x00 delimiter. */
 static size_t cobs_encode(const uint8_t *in, size_t n, uint8_t *out)
 {
-    const uint8_t *end = in + n;
-    size_t o = 0;
-    for (;;) {
-        const uint8_t *zero = (const uint8_t *)memchr(in, 0, (size_t)(end - in));
-        size_t run = (size_t)((zero != NULL ? zero : end) - in);
-        out[o] = (uint8_t)(run + 1u);
-        memcpy(out + o + 1u, in, run);
-        o += run + 1u;
-        if (zero == NULL) {
-            break;
+    size_t code_at = 0;
+    size_t o = 1;
+    uint8_t code = 1;
+    for (size_t i = 0; i < n; i++) {
+        if (in[i] == 0u) {
+            out[code_at] = code;
+            code_at = o++;
+            code = 1;
+        } else {
+            out[o++] = in[i];
+            code++;
         }
-        in = zero + 1;
     }
+    out[code_at] = code;
     out[o++] = 0u;
     return o;
 }
