@@ -1088,6 +1088,20 @@ static int other_threads(void)
     return head != me || PyThreadState_Next(head) != NULL;
 }
 
+/* One call of the board's exchange, without the GIL when `release_gil` (see exchange_frames). */
+static size_t board_call(fw_exchange_fn exchange, void *fw, const uint8_t *rx, size_t rx_len, uint8_t *tx,
+                         size_t tx_cap, int release_gil)
+{
+    size_t n;
+    if (!release_gil) {
+        return exchange(fw, rx, rx_len, tx, tx_cap);
+    }
+    Py_BEGIN_ALLOW_THREADS
+    n = exchange(fw, rx, rx_len, tx, tx_cap);
+    Py_END_ALLOW_THREADS
+    return n;
+}
+
 static int exchange_frames(const char *who, fw_exchange_fn exchange, void *fw, EncoderObject *enc,
                            DecoderObject *dec, PyObject *capture_out, PyObject *capture_in,
                            PyObject *const *fields, int64_t *counts, answer_queue *q, PyObject **spill,
@@ -1109,13 +1123,7 @@ static int exchange_frames(const char *who, fw_exchange_fn exchange, void *fw, E
      * docs/modbus.md). The call touches only the frames on this stack and the board's own
      * instance. With no other thread (release_gil 0: other_threads()) the release would only
      * cost its mutex operations, about 400 instructions a period. */
-    if (release_gil) {
-        Py_BEGIN_ALLOW_THREADS
-        n = exchange(fw, frame, (size_t)n_frame, tx, sizeof tx);
-        Py_END_ALLOW_THREADS
-    } else {
-        n = exchange(fw, frame, (size_t)n_frame, tx, sizeof tx);
-    }
+    n = board_call(exchange, fw, frame, (size_t)n_frame, tx, sizeof tx, release_gil);
     while (n > 0u) {
         frames_in += count_delimiters(tx, n);
         bytes_in += n;
@@ -1128,13 +1136,7 @@ static int exchange_frames(const char *who, fw_exchange_fn exchange, void *fw, E
         if (n < sizeof tx) {
             break;
         }
-        if (release_gil) {
-            Py_BEGIN_ALLOW_THREADS
-            n = exchange(fw, NULL, 0u, tx, sizeof tx);   /* drain what did not fit */
-            Py_END_ALLOW_THREADS
-        } else {
-            n = exchange(fw, NULL, 0u, tx, sizeof tx);
-        }
+        n = board_call(exchange, fw, NULL, 0u, tx, sizeof tx, release_gil);  /* drain what did not fit */
     }
     counts[0] += 1;
     counts[1] += (int64_t)frames_in;
