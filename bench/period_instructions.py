@@ -16,12 +16,13 @@ then split into the C functions that do its work, by their inclusive counts:
 - ``python_and_objects``: the rest: the interpreter running the period loop, the plant's and
   recorder's Python, object allocation, the MCAP writer's Python.
 
-``stub``, ``stub+log`` and ``plant_only`` also run with callgrind's cache model
+``stub``, ``stub+log`` and ``plant_only`` also run with callgrind's cache and branch models
 (``simulated_misses_per_period``: misses of a first-level instruction cache, ``I1``, and data
-cache, ``D1_read`` and ``D1_write``, of this CPU's sizes; a model, not the CPU's counters, which
-this VM does not expose). Their instruction counts are the same as without it; the misses are
-the instructions' cost that a count does not show: the bench's C code and the firmware's add
-code and tables to every period that the plant's loop alone does not touch.
+cache, ``D1_read`` and ``D1_write``, of this CPU's sizes; ``simulated_mispredicts_per_period``:
+conditional and indirect branches its simple predictors miss; models, not the CPU's counters,
+which this VM does not expose). Their instruction counts are the same as without them; the
+misses are the instructions' cost that a count does not show: the bench's C code and the
+firmware's add code and tables to every period that the plant's loop alone does not touch.
 
 Since the C period loop (protocol.ccodec.exchange_periods) the last is mostly the plant's
 Python (sample, truth, step) and the MCAP writer's.
@@ -70,17 +71,20 @@ def _inclusive(out_file: Path) -> dict[str, int]:
     return found
 
 
-#: callgrind's events with --cache-sim=yes, in the order of its "Collected :" line: instructions,
-#: data reads and writes, then the misses of its model (first level I1/D1, last level LL).
-CACHE_EVENTS = ("Ir", "Dr", "Dw", "I1mr", "D1mr", "D1mw", "ILmr", "DLmr", "DLmw")
+#: callgrind's events with --cache-sim=yes --branch-sim=yes, in the order of its "Collected :"
+#: line: instructions, data reads and writes, the misses of its cache model (first level I1/D1,
+#: last level LL), then conditional and indirect branches and those its predictors missed.
+CACHE_EVENTS = ("Ir", "Dr", "Dw", "I1mr", "D1mr", "D1mw", "ILmr", "DLmr", "DLmw",
+                "Bc", "Bcm", "Bi", "Bim")
 
 
 def _run(kind: str, periods: int, out_file: Path, cache: bool = False) -> list[int]:
     """Runs bench._period_worker under callgrind; its "Collected" events: [instructions], or
-    all of CACHE_EVENTS with `cache` (the cache model does not change the instruction count)."""
+    all of CACHE_EVENTS with `cache` (the cache and branch models do not change the instruction
+    count)."""
     env = dict(os.environ, PYTHONHASHSEED="0")
     proc = subprocess.run(["valgrind", "--tool=callgrind", f"--callgrind-out-file={out_file}",
-                           *(["--cache-sim=yes"] if cache else []),
+                           *(["--cache-sim=yes", "--branch-sim=yes"] if cache else []),
                            sys.executable, "-m", "bench._period_worker", kind, str(periods)],
                           capture_output=True, text=True, cwd=REPO, env=env)
     m = re.search(r"Collected :((?: \d+)+)", proc.stderr)
@@ -93,7 +97,8 @@ def _run(kind: str, periods: int, out_file: Path, cache: bool = False) -> list[i
 def per_period(kind: str, periods: int, split: bool = False, cache: bool = False) -> dict:
     """Instructions a period of `kind`; with `split` its parts (PARTS), with `cache` the
     misses a period in callgrind's cache model (first-level instruction and data caches of
-    this CPU's sizes, 32 KiB each here: ``I1``, ``D1_read``, ``D1_write``; ``last_level``)."""
+    this CPU's sizes, 32 KiB each here: ``I1``, ``D1_read``, ``D1_write``; ``last_level``) and
+    the branches its predictors miss a period (``conditional``, ``indirect``)."""
     with tempfile.TemporaryDirectory() as tmp, ThreadPoolExecutor(2) as pool:
         short, long = Path(tmp) / "short.out", Path(tmp) / "long.out"
         # the two runs side by side: instruction counts do not depend on the machine's load
@@ -108,6 +113,8 @@ def per_period(kind: str, periods: int, split: bool = False, cache: bool = False
                 "I1": round(ev["I1mr"]), "D1_read": round(ev["D1mr"]),
                 "D1_write": round(ev["D1mw"]),
                 "last_level": round(ev["ILmr"] + ev["DLmr"] + ev["DLmw"], 1)}
+            out["simulated_mispredicts_per_period"] = {
+                "conditional": round(ev["Bcm"]), "indirect": round(ev["Bim"])}
         if split:
             a, b = _inclusive(short), _inclusive(long)
             parts = {name: round(sum(b.get(f, 0) - a.get(f, 0) for f in funcs) / periods)
@@ -124,8 +131,9 @@ def run(quick: bool = False) -> dict:
     # Long enough that the garbage collector's full passes (every so many surviving objects)
     # average out: 1000 periods read 76,000 instructions for `stub` once, 4000 read 53,800.
     periods = 2000 if quick else 4000
-    # The three headline kinds run with callgrind's cache model as well: the instruction counts
-    # are the same, and the misses show where the wall ratio departs from the instruction one.
+    # The three headline kinds run with callgrind's cache and branch models as well: the
+    # instruction counts are the same, and the misses show where the wall ratio departs from
+    # the instruction one.
     out = {"periods": periods, "stub": per_period("stub", periods, cache=True),
            "stub+log": per_period("stub+log", periods, split=True, cache=True),
            "stub+log, lz4 level 0": per_period("stub+log@lz4_level0", periods, split=True),
