@@ -114,6 +114,10 @@ def stub_log_plant_interleaved(periods: int, batches: int) -> dict:
     out["batches"], out["periods_per_batch"] = batches, periods
     out["log_us_per_period"] = round(1e6 / med["stub+log"] - 1e6 / med["stub"], 2)
     out["stub+log_vs_plant_only"] = round(med["plant_only"] / med["stub+log"], 2)
+    # Each round's own ratio (its logged batch against the plant batch right after it): how
+    # far one round strays from the medians' ratio.
+    ratios = [p / s for p, s in zip(rates["plant_only"], rates["stub+log"])]
+    out["per_round_ratio_range"] = [round(min(ratios), 2), round(max(ratios), 2)]
     return out
 
 
