@@ -121,6 +121,42 @@ def stub_log_plant_interleaved(periods: int, batches: int) -> dict:
     return out
 
 
+def log_compression_interleaved(periods: int, batches: int) -> dict:
+    """The logged in-process session with its chunks at the default lz4 and uncompressed
+    (`hil run --log-compression none`), batches taken in turn: what the compression costs a
+    period in the session itself (bench.mcap_logging times the recorder alone), and the
+    file bytes a period of each."""
+    profile = load_profile()
+    rates: dict[str, list[float]] = {"lz4": [], "none": []}
+    with tempfile.TemporaryDirectory() as tmp:
+        sessions = {c: BenchSession(profile, SessionConfig(link="stub", log_compression=c,
+                                                           log_path=Path(tmp) / f"{c}.mcap"))
+                    for c in rates}
+        try:
+            for s in sessions.values():
+                s.start()
+                s.send_command(enable=True, speed_source="ekf", speed_ref_rpm=3000)
+                s.run_periods(4 * periods)
+            for _ in range(batches):
+                for c, s in sessions.items():
+                    t0 = time.perf_counter()
+                    s.run_periods(periods)
+                    rates[c].append(periods / (time.perf_counter() - t0))
+        finally:
+            for s in sessions.values():
+                s.close()
+        total = (4 + batches) * periods
+        size = {c: (Path(tmp) / f"{c}.mcap").stat().st_size / total for c in rates}
+    med = {c: statistics.median(v) for c, v in rates.items()}
+    out = {c: {"periods_per_s": round(v), "us_per_period": round(1e6 / v, 2),
+               "file_bytes_per_period": round(size[c], 1)} for c, v in med.items()}
+    out["batches"], out["periods_per_batch"] = batches, periods
+    out["lz4_us_per_period"] = round(1e6 / med["lz4"] - 1e6 / med["none"], 2)
+    out["lz4_period_over_none"] = round(med["none"] / med["lz4"], 3)
+    out["lz4_file_over_none"] = round(size["lz4"] / size["none"], 3)
+    return out
+
+
 def hil_run_startup(runs: int) -> dict:
     """Wall time of `hil run` on a two-period plan (the shortest a check can read: process
     start, imports, stub load, handshake, the periods, reports), median of `runs`."""
@@ -272,6 +308,9 @@ def run(quick: bool = False) -> dict:
     interleaved = stub_log_plant_interleaved(2000, 9 if quick else 31)
     out["lockstep"]["stub, stub+log, plant_only interleaved"] = interleaved
     out["lockstep"]["stub+log_vs_plant_only"] = interleaved["stub+log_vs_plant_only"]
+    # The same logged session with the log's chunks at lz4 (the default) and uncompressed.
+    out["lockstep"]["stub+log, lz4 and uncompressed interleaved"] = log_compression_interleaved(
+        2000, 5 if quick else 15)
     out["hil_run_startup"] = hil_run_startup(3 if quick else 7)
     # Two `hil run` side by side, OpenBLAS at hil's one thread and at its own default.
     out["hil_run_side_by_side_openblas"] = startup_side_by_side(2 if quick else 5)

@@ -92,14 +92,54 @@ def test_serve_runs_the_plant_against_the_stub_for_a_duration(tmp_path):
     log = tmp_path / "serve.mcap"
     proc = subprocess.run([sys.executable, "-m", "hil.cli.main", "serve", "--link", "stub", "--duration",
                            "0.02", "--modbus", "off", "--log", str(log), "--enable",
-                           "--speed-rpm", "1000"],
+                           "--speed-rpm", "1000", "--log-compression", "zstd"],
                           capture_output=True, text=True, timeout=120, cwd=REPO)
     assert proc.returncode == 0, proc.stderr
     assert "400 periods" in proc.stderr
+    from mcap.reader import make_reader
+
     from hil.logs.reader import read_log
 
     truth = read_log(log)["/plant/truth"]
     assert len(truth) == 400 and truth["speed_rpm"][-1] > 50.0  # the board drove the motor
+    with open(log, "rb") as f:
+        assert {c.compression for c in make_reader(f).get_summary().chunk_indexes} == {"zstd"}
+
+
+@pytest.mark.parametrize("choice", ["lz4", "zstd", "none"])
+def test_log_compression_option_sets_the_chunks_compression(tmp_path, choice):
+    """--log-compression reaches the MCAP writer: every chunk of the run's log says so in its
+    chunk index, as the mcap package reads it, and the log reads back whole."""
+    from mcap.reader import make_reader
+
+    from hil.logs.mcap_writer import COMPRESSIONS
+    from hil.logs.reader import read_log
+
+    out = tmp_path / "out"
+    assert hil_main(["run", str(_plan(tmp_path, 100)), "--out", str(out), "--no-progress",
+                     "--log-compression", choice]) == 0
+    log = out / "short-spin" / "log.mcap"
+    with open(log, "rb") as f:
+        chunks = make_reader(f).get_summary().chunk_indexes
+    assert chunks and {c.compression for c in chunks} == {"" if choice == "none" else choice}
+    assert len(read_log(log)["/plant/truth"]) == 1000      # 0.05 s at 50 us
+    assert choice in COMPRESSIONS
+
+
+def test_log_compression_choices_are_the_writers():
+    from hil.cli.main import LOG_COMPRESSIONS
+    from hil.logs.mcap_writer import COMPRESSIONS
+
+    assert LOG_COMPRESSIONS == COMPRESSIONS
+
+
+def test_unknown_log_compression_is_refused_naming_the_choices(tmp_path, capsys):
+    with pytest.raises(SystemExit) as exc:
+        hil_main(["run", str(_plan(tmp_path, 100)), "--out", str(tmp_path / "out"),
+                  "--no-progress", "--log-compression", "gzip"])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "--log-compression" in err and "gzip" in err and "lz4" in err
 
 
 def test_help_for_every_command():

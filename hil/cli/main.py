@@ -17,6 +17,12 @@ from pathlib import Path
 
 EXIT_PASS, EXIT_FAIL, EXIT_ERROR = 0, 1, 2
 COMMANDS = ("run", "serve", "log", "bench", "plans", "sweep", "init")
+# hil.logs.mcap_writer.COMPRESSIONS, spelt out so that parsing a command line does not import
+# the writer (tests/test_cli.py holds the two together)
+LOG_COMPRESSIONS = ("lz4", "zstd", "none")
+LOG_COMPRESSION_HELP = ("the MCAP log's chunk compression: lz4 (default; its fast mode), zstd "
+                        "(smaller files, more time a period) or none (the least time a period, "
+                        "the largest files): docs/logging.md")
 
 
 def _terminal_columns() -> int:
@@ -78,6 +84,8 @@ def _parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
                          help="run every plan on this bench profile (a name such as paper or "
                               "paper-hardware, or a YAML path) instead of the plans' own profiles")
         run.add_argument("--modbus", metavar="[HOST:]PORT", help="serve the Modbus control port while running")
+        run.add_argument("--log-compression", choices=LOG_COMPRESSIONS, default="lz4",
+                         help=LOG_COMPRESSION_HELP)
         run.add_argument("--no-progress", action="store_true", help="no progress bar")
         run.add_argument("--live", metavar="[HOST:]PORT", nargs="?", const="127.0.0.1:8765",
                          help="Foxglove WebSocket server while the plans run (default 127.0.0.1:8765)")
@@ -93,6 +101,8 @@ def _parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
                            help="Modbus TCP control port (default 127.0.0.1:5020; 'off' to disable)")
         serve.add_argument("--duration", type=float, help="simulated seconds to run (default: until Ctrl-C)")
         serve.add_argument("--log", type=Path, help="MCAP log path")
+        serve.add_argument("--log-compression", choices=LOG_COMPRESSIONS, default="lz4",
+                           help=LOG_COMPRESSION_HELP)
         serve.add_argument("--speed-rpm", type=float, default=0.0,
                            help="speed reference sent to the board (default 0)")
         serve.add_argument("--speed-source", choices=("encoder", "conventional", "ekf"), default="encoder",

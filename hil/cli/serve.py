@@ -31,7 +31,8 @@ def serve_command(args) -> int:
     from hil.ports.modbus import ControlMailbox, ModbusPort
 
     profile = load_bench_profile(args.profile)
-    config = SessionConfig(link=args.link, mode=args.mode, log_path=args.log)
+    config = SessionConfig(link=args.link, mode=args.mode, log_path=args.log,
+                           log_compression=args.log_compression)
     mailbox = ControlMailbox(load_torque_nm=profile.load.torque_nm,
                              dc_link_voltage_v=profile.dc_link.source_voltage_v, run=args.enable,
                              speed_ref_rpm=args.speed_rpm)

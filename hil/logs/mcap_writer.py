@@ -524,6 +524,9 @@ def crc32(data: bytes | bytearray | memoryview, value: int = 0) -> int:
 #: period: about 600 fewer than at -2); from -4 on the files grow.
 LZ4_LEVEL = -3
 
+#: the chunk compressions McapLog writes (MCAP's names; "none" is written as "")
+COMPRESSIONS = ("lz4", "zstd", "none")
+
 
 def _chunk_tail(active: list, chunk_start: int, chunk_length: int, start: int, end: int,
                 compression: str, compressed_size: int, uncompressed_size: int) -> tuple[bytes, bytes]:

@@ -201,6 +201,7 @@ class RunOptions:
     progress: Any = None            # callable(done_s, total_s) or None
     modbus: tuple[str, int] | None = None
     log: bool = True
+    log_compression: str = "lz4"    # the MCAP log's chunks: lz4, zstd or none (SessionConfig)
     reports: bool = True            # False: only the MCAP log goes into out_dir (hil sweep)
     profile: Any = None             # a name, a path or a ProfileRef; None: the plan's first
     live: Any = None                # hil.live.LiveStream: the run's channels to live viewers
@@ -221,13 +222,13 @@ def run_plan(plan: Plan, link: str | None = None, mode: str | None = None,
              out_dir: Path | None = None, seed: int = 0, progress=None,
              modbus: tuple[str, int] | None = None,
              reports: bool = True, profile=None, live=None, console=None,
-             on_step=None) -> tuple[PlanResult, SignalSet]:
+             on_step=None, log_compression: str = "lz4") -> tuple[PlanResult, SignalSet]:
     """Runs one plan on one profile (default: the plan's first); writes log and (unless
     reports=False) reports into out_dir/<plan_dir_name> when given. Never raises for a
     failing board or plan: the outcome says what happened."""
     opts = RunOptions(link=link, mode=mode, out_dir=out_dir, seed=seed, progress=progress,
                       modbus=modbus, reports=reports, profile=profile, live=live,
-                      console=console, on_step=on_step)
+                      console=console, on_step=on_step, log_compression=log_compression)
     return _run(plan, opts)
 
 
@@ -250,6 +251,7 @@ def _run(plan: Plan, opts: RunOptions) -> tuple[PlanResult, SignalSet]:
     try:
         profile = profile_for(plan, ref)
         config = SessionConfig(link=link, mode=mode, log_path=log_path, seed=opts.seed,
+                               log_compression=opts.log_compression,
                                metadata={"plan": {"name": plan.name, "source": str(plan.source_path),
                                                   "profile": ref.label}})
         session = BenchSession(profile, config)
@@ -536,7 +538,8 @@ def run_command(args) -> int:
                 on_step = lambda step, task=task, plan=plan: bar.update(task, step=_step_text(step, plan))
             result, _signals = run_plan(plan, link=args.link, mode=args.mode, out_dir=out,
                                         seed=args.seed, progress=callback, modbus=modbus,
-                                        profile=ref, live=live, console=console, on_step=on_step)
+                                        profile=ref, live=live, console=console, on_step=on_step,
+                                        log_compression=getattr(args, "log_compression", "lz4"))
             console.close()
             if bar is not None:
                 bar.remove_task(task)          # its verdict line below says how it ended

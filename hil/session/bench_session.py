@@ -54,6 +54,9 @@ class SessionConfig:
     link: str = "stub"
     mode: str = "lockstep"                  # lockstep | realtime
     log_path: Path | None = None
+    # The log's chunk compression (hil.logs.mcap_writer.McapLog): lz4 (its fast mode, the
+    # default), zstd (smaller files, more time a period) or none (the least time a period).
+    log_compression: str = "lz4"
     seed: int = 0
     # SPEC.md 2.8's session policy: None takes the bench profile's `session` section (its
     # defaults are SPEC's); a value here overrides it (tests, CLI options).
@@ -171,7 +174,8 @@ class BenchSession:
         if cfg.log_path is not None:
             from hil.logs.mcap_writer import McapLog
 
-            self.log = McapLog(cfg.log_path, metadata=self._metadata())
+            self.log = McapLog(cfg.log_path, metadata=self._metadata(),
+                               compression=cfg.log_compression)
             self.recorder.attach_log(self.log)
         self.conn = connect(cfg.link)
         if cfg.tap_link and tappable(self.conn.link):
