@@ -76,6 +76,21 @@ def plant_only_rate(periods: int, batches: int) -> dict:
     return {"periods_per_s": round(rate), "us_per_period": round(1e6 / rate, 2)}
 
 
+def _to_speed(session: BenchSession, periods: int) -> None:
+    """Starts `session` and runs it to 3000 rpm on the EKF's speed and past the warm-up (4 x
+    `periods`), as the interleaved comparisons begin."""
+    session.start()
+    session.send_command(enable=True, speed_source="ekf", speed_ref_rpm=3000)
+    session.run_periods(4 * periods)
+
+
+def _batch_rate(session: BenchSession, periods: int) -> float:
+    """Periods/s of `periods` more periods of `session`."""
+    t0 = time.perf_counter()
+    session.run_periods(periods)
+    return periods / (time.perf_counter() - t0)
+
+
 def stub_log_plant_interleaved(periods: int, batches: int) -> dict:
     """Issue 18's headline trio side by side: `stub`, `stub` with the full log, and the plant
     alone (sample, truth, step, replaying the stub's switch words), in short batches taken in
@@ -90,21 +105,13 @@ def stub_log_plant_interleaved(periods: int, batches: int) -> dict:
         logged = BenchSession(profile, SessionConfig(link="stub", log_path=Path(tmp) / "bench.mcap"))
         try:
             for s in (plain, logged):
-                s.start()
-                s.send_command(enable=True, speed_source="ekf", speed_ref_rpm=3000)
-                s.run_periods(4 * periods)          # to 3000 rpm and past the warm-up
+                _to_speed(s, periods)
             gates = [int(row[4]) for row in plain.recorder.telemetry_rows[-periods:]]
             plant_only = _plant_replay(Plant(profile, seed=0), gates)
-
-            def session_rate(s: BenchSession) -> float:
-                t0 = time.perf_counter()
-                s.run_periods(periods)
-                return periods / (time.perf_counter() - t0)
-
             rates: dict[str, list[float]] = {"stub": [], "stub+log": [], "plant_only": []}
             for _ in range(batches):
-                rates["stub"].append(session_rate(plain))
-                rates["stub+log"].append(session_rate(logged))
+                rates["stub"].append(_batch_rate(plain, periods))
+                rates["stub+log"].append(_batch_rate(logged, periods))
                 rates["plant_only"].append(plant_only())
         finally:
             plain.close()
@@ -134,14 +141,10 @@ def log_compression_interleaved(periods: int, batches: int) -> dict:
                     for c in rates}
         try:
             for s in sessions.values():
-                s.start()
-                s.send_command(enable=True, speed_source="ekf", speed_ref_rpm=3000)
-                s.run_periods(4 * periods)
+                _to_speed(s, periods)
             for _ in range(batches):
                 for c, s in sessions.items():
-                    t0 = time.perf_counter()
-                    s.run_periods(periods)
-                    rates[c].append(periods / (time.perf_counter() - t0))
+                    rates[c].append(_batch_rate(s, periods))
         finally:
             for s in sessions.values():
                 s.close()

@@ -539,7 +539,7 @@ def run_command(args) -> int:
             result, _signals = run_plan(plan, link=args.link, mode=args.mode, out_dir=out,
                                         seed=args.seed, progress=callback, modbus=modbus,
                                         profile=ref, live=live, console=console, on_step=on_step,
-                                        log_compression=getattr(args, "log_compression", "lz4"))
+                                        log_compression=args.log_compression)
             console.close()
             if bar is not None:
                 bar.remove_task(task)          # its verdict line below says how it ended
