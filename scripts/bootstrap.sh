@@ -10,6 +10,10 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 arch=$(uname -m)
+
+# The interpreter .venv is made from ($PYTHON, else the distribution's python3, else PATH's:
+# scripts/pick_python.sh says why).
+py=$(bash scripts/pick_python.sh)
 # Debian package -> files (shell globs) the build or the tests use from it, ';'-separated.
 declare -A NEEDED=(
   [libcmocka-dev]="/usr/include/cmocka.h;/usr/lib/*/libcmocka.so"
@@ -40,12 +44,12 @@ present() {  # present PKG -> 0 when every file of PKG is there
   for spec in "${specs[@]}"; do
     if [[ $spec == PYINCLUDE:* ]]; then
       local inc
-      inc=$(python3 -c 'import sysconfig; print(sysconfig.get_paths()["include"])')
+      inc=$("$py" -c 'import sysconfig; print(sysconfig.get_paths()["include"])')
       [ -e "$inc/${spec#PYINCLUDE:}" ] || { MISSING_FILE="$inc/${spec#PYINCLUDE:}"; return 1; }
       continue
     fi
     if [[ $spec == PYTHON:* ]]; then
-      python3 -c "import ${spec#PYTHON:}" >/dev/null 2>&1 || { MISSING_FILE="python3 modules ${spec#PYTHON:}"; return 1; }
+      "$py" -c "import ${spec#PYTHON:}" >/dev/null 2>&1 || { MISSING_FILE="$py modules ${spec#PYTHON:}"; return 1; }
       continue
     fi
     # shellcheck disable=SC2206
@@ -76,8 +80,14 @@ if [ ${#missing[@]} -gt 0 ]; then
   fi
 fi
 
+# A .venv made from another interpreter (an older bootstrap, another $PYTHON) is made again.
+base_of() { "$1" -c 'import os, sys; print(os.path.realpath(getattr(sys, "_base_executable", sys.executable)))' 2>/dev/null; }
+if [ -x .venv/bin/python ] && [ "$(base_of .venv/bin/python)" != "$(base_of "$py")" ]; then
+  echo "bootstrap: .venv was made from $(base_of .venv/bin/python); making it again from $(base_of "$py")" >&2
+  rm -rf .venv
+fi
 if [ ! -x .venv/bin/python ]; then
-  python3 -m venv .venv
+  "$py" -m venv .venv
 fi
 # The environment CI and users run is the lock file's (hashes checked); the package itself
 # is installed on top without resolving again. pyproject.toml keeps compatible ranges.
