@@ -47,31 +47,29 @@ def test_python_variable_too_old_is_an_error_naming_it(tmp_path):
     assert f"PYTHON={old} is 3.10" in got.stderr
 
 
-def test_distribution_python_before_path(tmp_path):
-    system = fake_python(tmp_path / "system", 3, 11)
+def system_and_path(tmp_path: Path, system: tuple[int, int], on_path: tuple[int, int]) -> tuple[Path, Path, Path]:
+    """A distribution python3 of version `system` and a python3 of `on_path` in a PATH directory."""
     bindir = tmp_path / "bin"
     bindir.mkdir()
-    fake_python(bindir / "python3", 3, 13)
+    return fake_python(tmp_path / "system", *system), fake_python(bindir / "python3", *on_path), bindir
+
+
+def test_distribution_python_before_path(tmp_path):
+    system, _, bindir = system_and_path(tmp_path, (3, 11), (3, 13))
     got = pick({"SYSTEM_PYTHON": str(system)}, path_dir=bindir)
     assert got.returncode == 0, got.stderr
     assert got.stdout.strip() == str(system)
 
 
 def test_path_python_when_distribution_python_too_old(tmp_path):
-    system = fake_python(tmp_path / "system", 3, 9)
-    bindir = tmp_path / "bin"
-    bindir.mkdir()
-    on_path = fake_python(bindir / "python3", 3, 12)
+    system, on_path, bindir = system_and_path(tmp_path, (3, 9), (3, 12))
     got = pick({"SYSTEM_PYTHON": str(system)}, path_dir=bindir)
     assert got.returncode == 0, got.stderr
     assert got.stdout.strip() == str(on_path)
 
 
 def test_no_python_new_enough_names_both(tmp_path):
-    system = fake_python(tmp_path / "system", 3, 9)
-    bindir = tmp_path / "bin"
-    bindir.mkdir()
-    fake_python(bindir / "python3", 3, 10)
+    system, _, bindir = system_and_path(tmp_path, (3, 9), (3, 10))
     got = pick({"SYSTEM_PYTHON": str(system)}, path_dir=bindir)
     assert got.returncode == 1
     assert f"{system} is 3.9" in got.stderr and "python3 on PATH is 3.10" in got.stderr
