@@ -10,8 +10,9 @@
 # packages serve (apt cannot add ensurepip or Python.h to a pyenv or conda build), and Debian
 # builds it with PGO and LTO and links libpython into the executable. On this project's CI
 # machine, where a pyenv 3.11.7 (a shared libpython, neither PGO nor LTO) comes first on PATH,
-# `hil run` starts about 1.3x as fast on Debian's 3.11 and a logged lockstep period takes
-# about 1/1.2 of the time (`python -m bench interpreter`; README, "Measured figures").
+# `hil run` started 1.25-1.31x as fast on Debian's 3.11 in two `hil bench` runs, while the
+# lockstep periods moved less than the VM's drift (logged 1.00-1.08x, plant alone 1.07-1.16x;
+# `python -m bench interpreter`; README, "Measured figures").
 set -euo pipefail
 
 version_of() { "$1" -c 'import sys; print("%d.%d" % sys.version_info[:2])' 2>/dev/null || echo "not runnable"; }
