@@ -22,10 +22,9 @@ import statistics
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
-from bench.session import TWO_PERIOD_PLAN
+from bench.session import TWO_PERIOD_PLAN, timed_hil_run
 
 ROOT = Path(__file__).resolve().parent.parent
 # Whether the process maps a libpython shared object: Debian's /usr/bin/python3.11 links the
@@ -44,12 +43,9 @@ def _describe(python: Path) -> dict:
 
 
 def _startup(venv: Path, plan: Path, out_dir: Path) -> float:
-    t0 = time.perf_counter()
-    proc = subprocess.run([str(venv / "bin" / "hil"), "run", str(plan), "--out", str(out_dir),
-                           "--no-progress"], capture_output=True, text=True, timeout=120)
-    took = time.perf_counter() - t0
-    if proc.returncode not in (0, 1):
-        raise RuntimeError(f"{venv}: hil run exited {proc.returncode}: {proc.stderr[-500:]}")
+    took, error = timed_hil_run(venv / "bin" / "hil", plan, out_dir)
+    if error is not None:
+        raise RuntimeError(f"{venv}: hil run failed: {error}")
     return took
 
 
@@ -86,12 +82,10 @@ def compare(this: Path, other: Path, rounds: int, startups: int, batches: int) -
                     "hil_run_startup_median_s": round(statistics.median(start[key]), 3),
                     "stub+log_us_per_period": round(statistics.median(logged[key]), 2),
                     "plant_only_us_per_period": round(statistics.median(plant[key]), 2)}
-    out["startup_other_over_this"] = round(out["other"]["hil_run_startup_median_s"]
-                                           / out["this"]["hil_run_startup_median_s"], 3)
-    out["stub+log_period_other_over_this"] = round(out["other"]["stub+log_us_per_period"]
-                                                   / out["this"]["stub+log_us_per_period"], 3)
-    out["plant_only_period_other_over_this"] = round(out["other"]["plant_only_us_per_period"]
-                                                     / out["this"]["plant_only_us_per_period"], 3)
+    for ratio, figure in (("startup", "hil_run_startup_median_s"),
+                          ("stub+log_period", "stub+log_us_per_period"),
+                          ("plant_only_period", "plant_only_us_per_period")):
+        out[f"{ratio}_other_over_this"] = round(out["other"][figure] / out["this"][figure], 3)
     return out
 
 

@@ -160,26 +160,34 @@ def log_compression_interleaved(periods: int, batches: int) -> dict:
     return out
 
 
+def timed_hil_run(hil: Path, plan: Path, out_dir: Path, env: dict | None = None) -> tuple[float, str | None]:
+    """One `hil run` of `plan` by the console script `hil`, process start to exit: (seconds,
+    None), or (seconds, the end of its stderr) when it exited with an error (not 0 or 1)."""
+    import subprocess
+
+    t0 = time.perf_counter()
+    proc = subprocess.run([str(hil), "run", str(plan), "--out", str(out_dir), "--no-progress"],
+                          env=env, capture_output=True, text=True, timeout=120)
+    took = time.perf_counter() - t0
+    return took, (proc.stderr[-500:] if proc.returncode not in (0, 1) else None)
+
+
 def hil_run_startup(runs: int) -> dict:
     """Wall time of `hil run` on a two-period plan (the shortest a check can read: process
     start, imports, stub load, handshake, the periods, reports), median of `runs`."""
-    import subprocess
     import sys
 
+    hil = Path(sys.executable).with_name("hil")     # the console script users run
     times = []
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "one.yaml"
         path.write_text(TWO_PERIOD_PLAN)
         for i in range(runs + 1):
-            t0 = time.perf_counter()
-            hil = Path(sys.executable).with_name("hil")     # the console script users run
-            proc = subprocess.run([str(hil), "run", str(path),
-                                   "--out", str(Path(tmp) / f"out{i}"), "--no-progress"],
-                                  capture_output=True, text=True, timeout=120)
+            took, error = timed_hil_run(hil, path, Path(tmp) / f"out{i}")
             if i:                                   # the first run warms the page cache
-                times.append(time.perf_counter() - t0)
-            if proc.returncode not in (0, 1):
-                return {"error": proc.stderr[-500:]}
+                times.append(took)
+            if error is not None:
+                return {"error": error}
     return {"median_s": round(statistics.median(times), 3), "runs": runs,
             "min_s": round(min(times), 3), "max_s": round(max(times), 3)}
 
@@ -193,7 +201,6 @@ def startup_side_by_side(runs: int) -> dict:
     (two processes a round) of each, and of the pair's wall time (until both exit); one warm-up
     round of each is not counted."""
     import os
-    import subprocess
     import sys
     import threading
 
@@ -210,12 +217,9 @@ def startup_side_by_side(runs: int) -> dict:
         n = 0
 
         def one(env: dict, out: list, slot: int) -> None:
-            t0 = time.perf_counter()
-            proc = subprocess.run([str(hil), "run", str(path), "--out", str(Path(tmp) / f"out{n}_{slot}"),
-                                   "--no-progress"], env=env, capture_output=True, text=True, timeout=120)
-            out[slot] = time.perf_counter() - t0
-            if proc.returncode not in (0, 1):
-                errors.append(proc.stderr[-500:])
+            out[slot], error = timed_hil_run(hil, path, Path(tmp) / f"out{n}_{slot}", env)
+            if error is not None:
+                errors.append(error)
 
         for r in range(runs + 1):
             for key, env in envs.items():
