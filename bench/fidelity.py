@@ -56,7 +56,7 @@ def _hardware_pieces() -> dict[str, dict]:
         # offsets and gain errors the board does not know (it keeps the nominal zero)
         "offset + gain": {"sensors": {"current": {"offset_counts": cur.offset_counts, "gain": cur.gain},
                                       "dc_voltage": {"offset_counts": vdc.offset_counts, "gain": vdc.gain}},
-                          "controller": {"current_offset_counts": 2048.0, "vdc_offset_counts": 0.0}},
+                          "board": {"current_offset_counts": 2048.0, "vdc_offset_counts": 0.0}},
         "R +20 %": {"motor": {"resistance_ohm": hw.motor.resistance_ohm}},
     }
 
@@ -71,9 +71,11 @@ def scenarios(quick: bool = False) -> list[tuple[str, Path, dict, dict]]:
     out = [("ideal (paper)", PAPER, {}, {})]
     for name, comp in (("delay", delay_comp), ("dead time", dt_comp), ("device drop", drop_comp),
                        ("noise", None), ("offset + gain", zero_cal), ("R +20 %", None)):
-        out.append((name, PAPER, hw[name], {}))
+        over = dict(hw[name])
+        told = over.pop("board", {})        # what the board is told (its board file's settings)
+        out.append((name, PAPER, over, told))
         if comp is not None:
-            out.append((f"{name} + comp", PAPER, hw[name], comp))
+            out.append((f"{name} + comp", PAPER, over, {**told, **comp}))
     out += [
         ("hardware, no comp", HARDWARE, {}, dict(COMP_OFF)),
         ("hardware, dead time + drop comp", HARDWARE, {}, {**COMP_OFF, **dt_comp, **drop_comp}),
@@ -94,16 +96,17 @@ def closed_loop(profile_path: Path, overrides: dict, board: dict, seed: int = 1)
     import numpy as np
 
     from hil.links.stub_library import StubLibraryLink
-    from hil.session.board_params import board_parameters, load_bench_profile
+    from hil.session.board_params import board_parameters, default_board, load_bench_profile
     from plant_rt import TRUTH_FIELDS, Plant
-    from protocol.messages import Command, Duty, Gates, ParamId, ParamSet, ParamValue, Sample, Telemetry
+    from protocol.messages import Command, Duty, Gates, ParamSet, ParamValue, Sample, Telemetry
 
     profile = load_bench_profile(profile_path, overrides or None)
     plant, link = Plant(profile, seed=seed), StubLibraryLink()
-    params = board_parameters(profile)
+    stub = default_board("stub")
+    params = {s.name: s.value for s in board_parameters(profile, stub, profile_path.stem)}
     params.update(board)
     for name, value in params.items():
-        link.send(ParamSet(int(ParamId[name.upper()]), float(value)))
+        link.send(ParamSet(stub.param(name).id, float(value)))
         answer = link.recv()
         while answer is not None and not isinstance(answer, ParamValue):
             answer = link.recv()
@@ -241,6 +244,7 @@ def hardware_plans() -> list[dict]:
 
     from hil.plans.format import load_plan
     from hil.run.runner import run_plan
+    from hil.session.board_params import default_board
 
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
@@ -271,20 +275,24 @@ def plan05_one_error_away() -> dict:
     exact = {"R exact (plant 0.466 ohm)": {"motor": {"resistance_ohm": 0.466}},
              "DC-link reading exact": {"sensors": {"dc_voltage": {
                  "offset_counts": 0.0, "gain": 1.0}}},
-             "R identification off (the board's cold R)": {"controller": {"rs_id_periods": 0}}}
+             "R identification off (the board's cold R)": {"board": {"rs_id_periods": 0}}}
     out = {}
     with tempfile.TemporaryDirectory() as tmp:
         for name, override in exact.items():
             data = yaml.safe_load(HARDWARE.read_text())
+            override = dict(override)
+            board = default_board("stub").with_settings(override.pop("board", None))
             for section, values in override.items():
                 for key, value in values.items():
                     if isinstance(value, dict):
                         data[section][key].update(value)
                     else:
                         data[section][key] = value
-            path = Path(tmp) / "variant.yaml"
+            # named as the profile it varies: the board file's paper-hardware settings apply
+            path = Path(tmp) / HARDWARE.name
             path.write_text(yaml.safe_dump(data))
-            result, _ = run_plan(plan, out_dir=Path(tmp), reports=False, profile=str(path))
+            result, _ = run_plan(plan, out_dir=Path(tmp), reports=False, profile=str(path),
+                                 board=board)
             out[name] = {c.name: round(c.measured, 2) for c in result.checks
                          if c.measured is not None and "RMS" in c.name}
     return out

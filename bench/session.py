@@ -28,11 +28,15 @@ TWO_PERIOD_PLAN = ("name: two-periods\nsteps:\n  - run: {duration_s: 100.0e-6}\n
 
 def lockstep_rate(link: str, log: bool, periods: int, batches: int,
                   controller: dict | None = None) -> dict:
-    """``controller``: overrides of the profile's controller section (e.g. the TELEMETRY rate)."""
-    profile = load_profile(overrides={"controller": controller} if controller else None)
+    """``controller``: settings pushed on top of the stub's board file (e.g. the TELEMETRY rate)."""
+    from hil.session.board_params import default_board
+
+    profile = load_profile()
+    board = default_board(link).with_settings(controller)
     with tempfile.TemporaryDirectory() as tmp:
         log_path = Path(tmp) / "bench.mcap" if log else None
-        with BenchSession(profile, SessionConfig(link=link, log_path=log_path)) as session:
+        with BenchSession(profile, SessionConfig(link=link, log_path=log_path,
+                                                 board=board)) as session:
             hold = session.cpu_latency.status
             session.send_command(enable=True, speed_source="ekf", speed_ref_rpm=3000)
             session.run_periods(periods // 4)  # warm-up

@@ -12,7 +12,6 @@ from the overrides.
 from __future__ import annotations
 
 import copy
-import re
 import dataclasses
 from dataclasses import field
 from pathlib import Path
@@ -29,16 +28,6 @@ from plant_rt.motor import MotorParams
 from plant_rt.sensors import SensorParams
 from configfile.fields import coerce, param, to_float, type_hints
 
-
-
-@dataclass(frozen=True)
-class ControllerNames:
-    """Which names the profile's `controller` section may hold. The plant does not know the
-    board's parameters (they belong to the protocol); the bench passes its list
-    (hil.session.board_params.CONTROLLER_NAMES), anyone else gets any lower-case name."""
-
-    settable: tuple[str, ...] | None = None   # None: any lower_snake_case name
-    read_only: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -69,7 +58,6 @@ class BenchProfile:
     load: LoadParams = field(default_factory=LoadParams)
     sensors: SensorParams = field(default_factory=SensorParams)
     initial: InitialState = field(default_factory=InitialState)
-    controller: dict[str, float] = field(default_factory=dict)
     # How the bench talks to the board (waits, resends, watchdog: protocol/SPEC.md 2.8). Not
     # physics: plant_rt keeps it as data, the bench checks it (session_schema) and uses it.
     session: dict[str, Any] = field(default_factory=dict)
@@ -89,18 +77,17 @@ class BenchProfile:
         return out
 
 
-_SNAKE = re.compile(r"^[a-z][a-z0-9_]*$")
-
 SECTIONS = {f.name for f in dataclasses.fields(BenchProfile)} - {"source"}
 
 
 def profile_schema() -> dict:
     """The profile's structure as JSON Schema (configfile.schema): every section a parameter
-    dataclass, `controller` a mapping whose names the bench checks."""
+    dataclass, `session` a mapping the bench checks."""
     hints = type_hints(BenchProfile)
     sections = {name: nullable(dataclass_schema(hints[name]))
-                for name in SECTIONS if name not in ("controller", "session")}
-    sections["controller"] = {"type": ["object", "null"]}
+                for name in SECTIONS if name != "session"}
+    # A profile says what the bench emulates; what a board is told lives in its board file.
+    sections["controller"] = {"description": "moved to board files"}
     sections["session"] = {"type": ["object", "null"]}
     return obj(sections)
 
@@ -111,13 +98,11 @@ def default_profile_path() -> Path:
 
 def load_profile(path: str | Path | None = None,
                  overrides: dict[str, Any] | None = None,
-                 controller_names: ControllerNames = ControllerNames(),
                  session_schema: dict | None = None) -> BenchProfile:
     """Reads and validates a bench profile; raises configfile.ConfigError on a bad value.
 
-    `controller_names` and `session_schema` are the bench's: which board parameters the
-    `controller` section may name, and the JSON Schema of the `session` section (without
-    it, `session` must be a mapping)."""
+    `session_schema` is the bench's JSON Schema of the `session` section (without it,
+    `session` must be a mapping)."""
     path = Path(path) if path is not None else default_profile_path()
     doc = load_yaml(path)
     data = doc.data if doc.data is not None else {}
@@ -136,12 +121,11 @@ def load_profile(path: str | Path | None = None,
         if session_schema is not None:
             schema["properties"]["session"] = nullable(session_schema)
         SchemaChecker(doc, error=err).check(schema, data)
-    return build_profile(data, _error_factory(doc, marks), doc.source, controller_names)
+    return build_profile(data, _error_factory(doc, marks), doc.source)
 
 
 def build_profile(data: Any, err: Callable[[tuple, str], ConfigError],
-                  source: str = "<data>",
-                  controller_names: ControllerNames = ControllerNames()) -> BenchProfile:
+                  source: str = "<data>") -> BenchProfile:
     """Validates already-parsed profile data; `err(key_path, message)` makes the errors."""
     if not isinstance(data, dict):
         raise err((), "a bench profile is a mapping of sections "
@@ -149,11 +133,13 @@ def build_profile(data: Any, err: Callable[[tuple, str], ConfigError],
     hints = type_hints(BenchProfile)
     sections: dict[str, Any] = {}
     for key, value in data.items():
+        if key == "controller":
+            raise err((key,), "a bench profile no longer carries what the board is told: move "
+                              "these parameters to a board file's `settings` (docs/boards.md) "
+                              "and give it with `hil run --board FILE` or a plan's `board:`")
         if key not in SECTIONS:
             raise err((key,), f"unknown section (known: {', '.join(sorted(SECTIONS))})")
-        if key == "controller":
-            sections[key] = _controller(value, err, controller_names)
-        elif key == "session":
+        if key == "session":
             if value is not None and not isinstance(value, dict):
                 raise err((key,), "expected a mapping of session settings")
             sections[key] = dict(value or {})
@@ -183,29 +169,6 @@ def _build(cls: type, data: Any, path: tuple, err: Callable[[tuple, str], Config
         except ValueError as exc:
             raise err(path + (key,), str(exc)) from None
     return cls(**kwargs)
-
-
-def _controller(data: Any, err: Callable[[tuple, str], ConfigError],
-                names: ControllerNames) -> dict[str, float]:
-    if data is None:
-        return {}
-    if not isinstance(data, dict):
-        raise err(("controller",), "expected a mapping of controller parameter names to numbers")
-    out = {}
-    for key, value in data.items():
-        path = ("controller", key)
-        if key in names.read_only:
-            raise err(path, "read-only controller parameter: the board reports it, the bench "
-                            "cannot set it")
-        if names.settable is not None and key not in names.settable:
-            raise err(path, f"unknown controller parameter (known: {', '.join(names.settable)})")
-        if names.settable is None and not (isinstance(key, str) and _SNAKE.match(key)):
-            raise err(path, "a controller parameter name is lower_snake_case")
-        try:
-            out[key] = to_float(value)
-        except ValueError as exc:
-            raise err(path, str(exc)) from None
-    return out
 
 
 def _cross_check(profile: BenchProfile, err: Callable[[tuple, str], ConfigError]) -> None:

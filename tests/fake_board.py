@@ -29,12 +29,13 @@ class FakeBoard:
                  die_after_samples: int | None = None, role: int = int(Role.CONTROLLER),
                  capabilities: int = 1, control_period_ns: int | None = None,
                  clamp: dict[int, float] | None = None, hello_raw: bytes | None = None,
-                 on_sample=None, hello_after_tries: int = 1):
+                 on_sample=None, hello_after_tries: int = 1, known: set[int] | None = None):
         """role, capabilities, control_period_ns (None: echo the bench's): its HELLO.
         clamp: parameter id -> the value it answers PARAM_SET with (status OK).
         hello_raw: bytes sent instead of a HELLO answer (garbage, frames of another version).
         on_sample(sample, encoder) -> bytes: what it writes for a SAMPLE (default GATES 0).
-        hello_after_tries: answers only the n-th HELLO (1: the first)."""
+        hello_after_tries: answers only the n-th HELLO (1: the first).
+        known: the parameter ids it knows (None: all); others are answered status 1 UNKNOWN."""
         self.proto_version = proto_version
         self.answer_hello = answer_hello
         self.die_after_samples = die_after_samples
@@ -44,6 +45,7 @@ class FakeBoard:
         self.hello_raw = hello_raw
         self.on_sample = on_sample
         self.hello_after_tries = hello_after_tries
+        self.known = known
         self.hellos = 0
         self.master, slave = os.openpty()
         tty.setraw(slave, termios.TCSANOW)
@@ -101,6 +103,9 @@ class FakeBoard:
                                            capabilities=self.capabilities,
                                            control_period_ns=period,
                                            name_len=len(name), name=name))
+                elif isinstance(msg, (ParamSet, ParamGet)) and self.known is not None \
+                        and msg.id not in self.known:
+                    self._write(enc, ParamValue(id=msg.id, status=1, value=0.0))
                 elif isinstance(msg, ParamSet):
                     self.params[msg.id] = self.clamp.get(msg.id, msg.value)
                     self._write(enc, ParamValue(id=msg.id, status=0, value=self.params[msg.id]))

@@ -9,7 +9,7 @@ import pytest
 
 from configfile.source import ConfigError
 from plant_rt import BenchProfile, Plant, default_profile_path, load_profile
-from hil.session.board_params import READ_ONLY_PARAMS, SETTABLE_PARAMS, load_bench_profile
+from hil.session.board_params import load_bench_profile
 
 
 def write(tmp_path, text: str):
@@ -34,10 +34,8 @@ def test_default_profile_is_the_papers_bench():
     assert (p.sensors.dc_voltage.v_per_count, p.sensors.dc_voltage.offset_counts) == \
         (0.0244140625, 0.0)
     assert (p.sensors.encoder.lines_per_rev, p.sensors.encoder.counter_bits) == (1024, 16)
-    assert p.controller == {"torque_limit_nm": 2.0}
     # The file lists every key, so it equals the dataclass defaults.
-    assert p.as_dict() == {**BenchProfile().as_dict(), "controller": {"torque_limit_nm": 2.0},
-                           "source": p.source}
+    assert p.as_dict() == {**BenchProfile().as_dict(), "source": p.source}
 
 
 def test_missing_keys_take_the_papers_values(tmp_path):
@@ -49,7 +47,7 @@ def test_missing_keys_take_the_papers_values(tmp_path):
     """))
     assert p.motor.resistance_ohm == 0.6 and p.motor.flux_linkage_wb == 0.0928
     assert p.control_period_s == 50e-6
-    assert p.sensors.current.bits == 12 and p.controller == {}
+    assert p.sensors.current.bits == 12
     Plant(p).step(gates=0x29)
 
 
@@ -111,9 +109,8 @@ def test_unknown_keys_and_sections_are_rejected(tmp_path):
      "needs a bus capacitance", 1, "dc_link.capacitance_f"),
     ("load:\n  table: [[0.0, 1.0], [0.5, 2.0], [0.2, 0.0]]\n", "must not decrease", 2,
      "load.table"),
-    ("controller:\n  torque_limit_nm: 2.0\n  torque_limt_nm: 3.0\n",
-     "unknown controller parameter", 3, "controller.torque_limt_nm"),
-    ("controller:\n  control_step_cycles: 100\n", "read-only", 2, "controller.control_step_cycles"),
+    ("motor:\n  pole_pairs: 1\ncontroller:\n  torque_limit_nm: 2.0\n",
+     "board file", 3, "controller"),
     ("motor: [1, 2]\n", "expected a mapping", 1, "motor"),
     ("sensors:\n  encoder:\n    lines_per_rev: 0\n", "must be >= 1", 3,
      "sensors.encoder.lines_per_rev"),
@@ -130,10 +127,8 @@ def test_overrides_merge_and_are_validated_the_same_way(tmp_path):
           resistance_ohm: 0.5
           pole_pairs: 2
     """)
-    p = load_profile(path, overrides={"motor": {"resistance_ohm": 0.7},
-                                      "controller": {"ekf_k1": 0.1}})
+    p = load_profile(path, overrides={"motor": {"resistance_ohm": 0.7}})
     assert (p.motor.resistance_ohm, p.motor.pole_pairs) == (0.7, 2)
-    assert p.controller == {"ekf_k1": 0.1}
     with pytest.raises(ConfigError) as info:
         load_profile(path, overrides={"motor": {"inductance_d_h": -1.0}})
     assert info.value.key == "motor.inductance_d_h" and "(overrides)" in str(info.value)
@@ -156,26 +151,14 @@ def test_missing_file_and_bad_yaml(tmp_path):
         load_profile(path)
 
 
-def test_controller_names_are_the_protocol_parameter_ids():
-    """The list the profile accepts is hil_proto.h's hil_param_id, lower case, no prefix."""
-    header = (Path(__file__).resolve().parents[1] / "protocol" / "c" / "hil_proto.h").read_text()
-    block = re.search(r"typedef enum \{([^}]*)\} hil_param_id;", header).group(1)
-    ids = re.findall(r"HIL_PARAM_([A-Z0-9_]+)\s*=\s*\d+", block)
-    assert len(ids) > 20
-    assert sorted(name.lower() for name in ids) == sorted(SETTABLE_PARAMS + READ_ONLY_PARAMS)
-
-
-def test_the_plant_alone_takes_any_controller_name_but_checks_its_form(tmp_path):
-    """plant_rt does not know the board's parameters; without the bench's list it accepts any
-    lower_snake_case name and refuses anything else, with file, line and key."""
-    ok = tmp_path / "ok.yaml"
-    ok.write_text("controller:\n  my_gain: 2.0\n")
-    assert load_profile(ok).controller == {"my_gain": 2.0}
-    bad = tmp_path / "bad.yaml"
-    bad.write_text("controller:\n  My-Gain: 2.0\n")
-    with pytest.raises(ConfigError, match="lower_snake_case") as info:
+def test_a_profile_carries_no_board_settings(tmp_path):
+    """What the board is told lives in its board file: a profile's `controller` section is
+    refused with the file, line and key, and says where it went."""
+    bad = tmp_path / "old.yaml"
+    bad.write_text("controller:\n  torque_limit_nm: 2.0\n")
+    with pytest.raises(ConfigError, match="board file") as info:
         load_profile(bad)
-    assert info.value.line == 2 and info.value.key == "controller.My-Gain"
+    assert info.value.line == 1 and info.value.key == "controller"
 
 
 def test_session_section_is_checked_against_the_spec_keys(tmp_path):

@@ -35,7 +35,7 @@ def Rig(params: dict | None = None) -> ClosedLoop:
     """Plant + in-process stub, lockstep, telemetry every period: the bench's own closed
     loop (hil.session.closed_loop), with board parameters by their SPEC names; closed after
     the test."""
-    loop = ClosedLoop(controller={name.lower(): value for name, value in (params or {}).items()})
+    loop = ClosedLoop(settings={name.lower(): value for name, value in (params or {}).items()})
     _open.append(loop.__enter__())
     return loop
 

@@ -41,7 +41,7 @@ import pytest
 
 from hil.links.stub_library import STUB_DIR
 from hil.session.bench_session import BenchSession, SessionConfig
-from hil.session.board_params import load_bench_profile
+from hil.session.board_params import board_parameters, default_board, load_bench_profile
 from plant_rt import TRUTH_FIELDS
 from protocol.messages import ParamGet, ParamId
 
@@ -63,8 +63,10 @@ def _read(session: BenchSession, pid: ParamId) -> float:
 
 def test_identified_resistance_on_paper_hardware():
     profile = load_bench_profile(HARDWARE)
-    n_level = int(profile.controller["rs_id_periods"])
-    assert n_level == 1000 and int(profile.controller["current_zero_cal_periods"]) == 400
+    told = {s.name: s.value for s in board_parameters(profile, default_board("stub"),
+                                                       "paper-hardware")}
+    n_level = int(told["rs_id_periods"])
+    assert n_level == 1000 and int(told["current_zero_cal_periods"]) == 400
     f = {name: i for i, name in enumerate(TRUTH_FIELDS)}
     with BenchSession(profile, SessionConfig(link="stub", seed=0, hold_cpu_latency=False)) as s:
         assert _read(s, ParamId.STATOR_RESISTANCE_OHM) == pytest.approx(0.466, abs=1e-6)

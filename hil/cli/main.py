@@ -83,6 +83,10 @@ def _parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
         run.add_argument("--profile", metavar="NAME|PATH",
                          help="run every plan on this bench profile (a name such as paper or "
                               "paper-hardware, or a YAML path) instead of the plans' own profiles")
+        run.add_argument("--board", type=Path, metavar="FILE",
+                         help="board file: the parameters the board takes and the settings pushed "
+                              "to it (default: the plan's `board:`, else the stub's for the stub's "
+                              "links, else SPEC's required parameters only; docs/boards.md)")
         run.add_argument("--modbus", metavar="[HOST:]PORT", help="serve the Modbus control port while running")
         run.add_argument("--log-compression", choices=LOG_COMPRESSIONS, default="lz4",
                          help=LOG_COMPRESSION_HELP)
@@ -97,6 +101,9 @@ def _parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
         serve.add_argument("--link", default="stub", help=f"board link: {', '.join(LINK_CHOICES)}")
         serve.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep")
         serve.add_argument("--profile", type=Path, help="bench profile YAML (default: the paper's)")
+        serve.add_argument("--board", type=Path, metavar="FILE",
+                           help="board file (default: the stub's for the stub's links, else SPEC's "
+                                "required parameters only; docs/boards.md)")
         serve.add_argument("--modbus", metavar="[HOST:]PORT", default="127.0.0.1:5020",
                            help="Modbus TCP control port (default 127.0.0.1:5020; 'off' to disable)")
         serve.add_argument("--duration", type=float, help="simulated seconds to run (default: until Ctrl-C)")

@@ -31,8 +31,14 @@ def serve_command(args) -> int:
     from hil.ports.modbus import ControlMailbox, ModbusPort
 
     profile = load_bench_profile(args.profile)
+    board = None
+    if getattr(args, "board", None) is not None:
+        from hil.boards import load_board
+
+        board = load_board(args.board)
     config = SessionConfig(link=args.link, mode=args.mode, log_path=args.log,
-                           log_compression=args.log_compression)
+                           log_compression=args.log_compression, board=board,
+                           profile_label=str(args.profile) if args.profile else "paper")
     mailbox = ControlMailbox(load_torque_nm=profile.load.torque_nm,
                              dc_link_voltage_v=profile.dc_link.source_voltage_v, run=args.enable,
                              speed_ref_rpm=args.speed_rpm)

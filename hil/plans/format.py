@@ -14,6 +14,7 @@ carrying its index and source line, for the runner (hil.run.runner) to execute.
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import field
 from pathlib import Path
@@ -26,16 +27,19 @@ from hil.plans.checks import CHECK_KINDS, STATISTICS, ArgSpec, CheckKind, result
 from hil.plans.limits import Limits
 from hil.plans.signals import SIGNAL_CATALOG
 from hil.plans.units import Quantity, UnitError, canonical, compatible, unit as lookup_unit
-from hil.session.board_params import READ_ONLY_PARAMS, SETTABLE_PARAMS
+from hil.boards.standard import STANDARD_PARAMS
 from configfile.schema import (BOOLEAN, FRACTION, NAME, NON_NEGATIVE, NUMBER, POSITIVE, POSITIVE_INT,
                                SchemaChecker, obj, python_type)
 from configfile.source import ConfigError, KeyPath, YamlDocument, load_yaml, parse_yaml
 from hil.faults.catalog import FAULTS, PLANT_PARAMS
 
-# Board parameters a plan may PARAM_SET: protocol/c/hil_proto.h's hil_param_id
-# names, lower case without the HIL_PARAM_ prefix (control_step_cycles is read-only).
-BOARD_PARAMS: tuple[str, ...] = SETTABLE_PARAMS
-READ_ONLY_BOARD_PARAMS: tuple[str, ...] = READ_ONLY_PARAMS
+# SPEC 8's standard parameters a plan may PARAM_SET on any board that takes them. A board's
+# own (vendor) parameters come from its board file: a plan's `param_set` names are checked
+# against the board of the run before anything runs (hil.run.runner.check_plan_board).
+BOARD_PARAMS: tuple[str, ...] = tuple(n for n, p in STANDARD_PARAMS.items() if not p.read_only)
+READ_ONLY_BOARD_PARAMS: tuple[str, ...] = tuple(n for n, p in STANDARD_PARAMS.items()
+                                                if p.read_only)
+_PARAM_NAME = re.compile(r"^[a-z][a-z0-9_]*$")
 
 
 # Named bench profiles (plant_rt's default profile is the paper's): "paper" and
@@ -370,6 +374,7 @@ class Plan:
     profile_path: Path | None = None    # resolved when `profile` is a path (relative to the plan)
     overrides: Mapping[str, Any] = field(default_factory=lambda: MappingProxyType({}))
     link: str | None = None
+    board_path: Path | None = None      # `board:`, a board file relative to the plan
     mode: str | None = None
     timeout_s: float | None = None      # wall-clock budget for the whole plan
     plots: tuple[PlotSpec, ...] = ()
@@ -422,6 +427,7 @@ PLAN_SCHEMA = obj({
     "profiles": {"type": "array", "minItems": 1, "uniqueItems": True, "items": NAME},
     "overrides": {"type": "object"},
     "link": {"type": "string", "pattern": LINK_PATTERN},
+    "board": NAME,
     "mode": {"enum": list(MODES)},
     "timeout_s": POSITIVE,
     "steps": {"type": "array", "minItems": 1},
@@ -554,6 +560,11 @@ def _build(doc: YamlDocument, path: Path) -> Plan:
         refs.append(ProfileRef("paper", None))
     profile = data.get("profile", data["profiles"][0] if "profiles" in data else None)
     profile_path = refs[0].path
+    board_path = None
+    if data.get("board") is not None:
+        board_path = (path.parent / data["board"]).resolve()
+        if not board_path.is_file():
+            raise doc.error(("board",), f"board file not found: {board_path}")
     state = _BuildState(doc, v, str(doc.source), tuple(r.label for r in refs))
     steps = tuple(state.step(raw, i) for i, raw in enumerate(data["steps"]))
     plots = tuple(state.plot(raw, i) for i, raw in enumerate(data.get("plots", [])))
@@ -561,7 +572,7 @@ def _build(doc: YamlDocument, path: Path) -> Plan:
         name=data["name"], description=data.get("description", "").strip(),
         source_path=path, steps=steps, profile=profile, profile_path=profile_path,
         overrides=MappingProxyType(dict(data.get("overrides", {}))),
-        link=data.get("link"), mode=data.get("mode"),
+        link=data.get("link"), board_path=board_path, mode=data.get("mode"),
         timeout_s=None if data.get("timeout_s") is None else float(data["timeout_s"]),
         plots=plots, profiles=tuple(refs),
     )
@@ -608,9 +619,10 @@ class _BuildState:
         for name in body:
             if name in READ_ONLY_BOARD_PARAMS:
                 raise self.err(path + (name,), f"board parameter '{name}' is read-only")
-            if name not in BOARD_PARAMS:
-                raise self.err(path + (name,), f"unknown board parameter '{name}'; known: "
-                                               f"{', '.join(BOARD_PARAMS)}")
+            if not _PARAM_NAME.match(str(name)):
+                raise self.err(path + (name,), f"'{name}' is not a parameter name "
+                                               f"(lower_snake_case, as SPEC 8 and board files "
+                                               f"write them)")
         return ParamSetStep(**common, params=tuple((k, float(x)) for k, x in body.items()))
 
     def _load(self, body: dict, path: KeyPath, common: dict) -> LoadStep:

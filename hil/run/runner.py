@@ -74,6 +74,34 @@ def profile_ref(plan: Plan, profile: "str | Path | ProfileRef | None" = None) ->
     return ProfileRef(plan.profile or "paper", None)
 
 
+def board_for(plan: Plan, link: str | None = None, board=None):
+    """The board file of a run: the given one (a BoardFile or a path), else the plan's
+    `board:`, else the link's default (hil.session.board_params.default_board)."""
+    from hil.boards import BoardFile, load_board
+    from hil.session.board_params import default_board
+
+    if isinstance(board, BoardFile):
+        return board
+    if board is not None:
+        return load_board(board)
+    if plan.board_path is not None:
+        return load_board(plan.board_path)
+    return default_board(link or plan.link or "stub")
+
+
+def check_plan_board(plan: Plan, board) -> None:
+    """Every `param_set` of the plan names a parameter the board takes, with a value in its
+    range: ConfigError naming the plan's file, line and key, before anything runs."""
+    for step in plan.steps:
+        if not isinstance(step, ParamSetStep):
+            continue
+        for name, value in step.params:
+            problem = board.check_value(name, value)
+            if problem is not None:
+                raise ConfigError(problem, str(plan.source_path), step.line,
+                                  f"steps[{step.index}].param_set.{name}")
+
+
 def profile_for(plan: Plan, profile: "str | Path | ProfileRef | None" = None):
     """The bench profile of a run (profile_ref), with the plan's overrides applied."""
     ref = profile_ref(plan, profile)
@@ -204,6 +232,7 @@ class RunOptions:
     log_compression: str = "lz4"    # the MCAP log's chunks: lz4, zstd or none (SessionConfig)
     reports: bool = True            # False: only the MCAP log goes into out_dir (hil sweep)
     profile: Any = None             # a name, a path or a ProfileRef; None: the plan's first
+    board: Any = None               # a BoardFile or a path; None: the plan's, else the link's
     live: Any = None                # hil.live.LiveStream: the run's channels to live viewers
     console: Any = None             # hil.run.console.EventConsole (any fn(t_s, kind, data))
     on_step: Any = None             # callable(step) as each step starts (the progress line)
@@ -222,13 +251,15 @@ def run_plan(plan: Plan, link: str | None = None, mode: str | None = None,
              out_dir: Path | None = None, seed: int = 0, progress=None,
              modbus: tuple[str, int] | None = None,
              reports: bool = True, profile=None, live=None, console=None,
-             on_step=None, log_compression: str = "lz4") -> tuple[PlanResult, SignalSet]:
+             on_step=None, log_compression: str = "lz4",
+             board=None) -> tuple[PlanResult, SignalSet]:
     """Runs one plan on one profile (default: the plan's first); writes log and (unless
     reports=False) reports into out_dir/<plan_dir_name> when given. Never raises for a
     failing board or plan: the outcome says what happened."""
     opts = RunOptions(link=link, mode=mode, out_dir=out_dir, seed=seed, progress=progress,
                       modbus=modbus, reports=reports, profile=profile, live=live,
-                      console=console, on_step=on_step, log_compression=log_compression)
+                      console=console, on_step=on_step, log_compression=log_compression,
+                      board=board)
     return _run(plan, opts)
 
 
@@ -250,8 +281,11 @@ def _run(plan: Plan, opts: RunOptions) -> tuple[PlanResult, SignalSet]:
     port = None
     try:
         profile = profile_for(plan, ref)
+        board = board_for(plan, link, opts.board)
+        check_plan_board(plan, board)
         config = SessionConfig(link=link, mode=mode, log_path=log_path, seed=opts.seed,
-                               log_compression=opts.log_compression,
+                               log_compression=opts.log_compression, board=board,
+                               profile_label=ref.label,
                                metadata={"plan": {"name": plan.name, "source": str(plan.source_path),
                                                   "profile": ref.label}})
         session = BenchSession(profile, config)
@@ -317,6 +351,7 @@ def _run(plan: Plan, opts: RunOptions) -> tuple[PlanResult, SignalSet]:
     extra: dict[str, Any] = {}
     if session is not None:
         extra["board"] = session.board_name
+        extra["board_file"] = session.board.summary()
         extra["link_counters"] = session.link_counters() if session.conn is not None else {}
         extra["board_faults"] = [{"code": f.code, "period": f.period, "value": f.value}
                                  for f in session.faults]
@@ -487,6 +522,9 @@ def run_command(args) -> int:
         print(f"hil run: no plans found in {', '.join(map(str, args.plans))}", file=sys.stderr)
         return 2
     plans = [load_plan(f) for f in files]  # validate every plan before anything runs
+    board_arg = getattr(args, "board", None)
+    for plan in plans:                      # ... and against the board it will run on
+        check_plan_board(plan, board_for(plan, args.link, board_arg))
     modbus = None
     if args.modbus:
         from hil.cli.serve import parse_host_port
@@ -539,7 +577,8 @@ def run_command(args) -> int:
             result, _signals = run_plan(plan, link=args.link, mode=args.mode, out_dir=out,
                                         seed=args.seed, progress=callback, modbus=modbus,
                                         profile=ref, live=live, console=console, on_step=on_step,
-                                        log_compression=args.log_compression)
+                                        log_compression=args.log_compression,
+                                        board=board_arg)
             console.close()
             if bar is not None:
                 bar.remove_task(task)          # its verdict line below says how it ended

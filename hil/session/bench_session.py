@@ -31,7 +31,7 @@ from protocol.messages import (
 
 from hil.links.registry import BoardConnection, connect
 from hil.logs.recorder import COMMAND_FIELDS, Recorder
-from hil.session.board_params import board_parameters
+from hil.session.board_params import board_parameters, default_board
 from hil.session.cpu_latency import CpuLatencyHold
 from hil.session.errors import SessionError
 from hil.session.link_tap import LinkTap, tappable
@@ -77,6 +77,11 @@ class SessionConfig:
     # time (wake-ups on time). The in-process stub in lockstep never waits: no hold.
     hold_cpu_latency: bool = True
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)
+    # The board file (hil.boards.BoardFile): which parameters the board takes and what is
+    # pushed to it. None: the stub's for the stub's links, else a board from SPEC.md alone.
+    board: Any = None
+    # The profile's name or file, for the board file's profile_settings.
+    profile_label: str | None = None
 
 
 @dataclass
@@ -120,6 +125,10 @@ class BenchSession:
         self.log = None
         self.board_hello: Hello | None = None
         self.board_params: dict[str, float] = {}
+        self.board = self.config.board if self.config.board is not None else \
+            default_board(self.config.link)
+        # the board file's profile_settings key: the given label, else the profile file's stem
+        self.profile_label = self.config.profile_label or str(profile.source)
         self.faults: list[Fault] = []
         self.events: list[tuple[float, str, dict]] = []
         #: Called as fn(t_s, kind, data) for every event as it is recorded (the console, a
@@ -183,7 +192,8 @@ class BenchSession:
         self._apply_link_waits()
         try:
             self._handshake()
-            self._push_parameters(board_parameters(self.profile))
+            self._push_parameters(board_parameters(self.profile, self.board,
+                                                   self.profile_label))
         except SessionError as exc:
             self.plant.safe_state()
             self.error = str(exc)
@@ -244,6 +254,10 @@ class BenchSession:
                       "cpu_dma_latency": self.cpu_latency.status,
                       "protocol_version": str(PROTOCOL_VERSION)},
             "profile": {k: str(v) for k, v in _flatten(self.profile.as_dict()).items()},
+            "board": {"name": self.board.name, "source": self.board.source,
+                      **{f"settings.{s.name}": repr(s.value)
+                         for s in board_parameters(self.profile, self.board,
+                                                   self.profile_label)}},
         }
         meta.update(self.config.metadata)
         return meta
@@ -299,6 +313,10 @@ class BenchSession:
             if not caps & (1 << CAPABILITY_NAMES.index(name)):
                 raise SessionError(f"{where} lacks capability {name}, required by the profile "
                                    f"(session.require_capabilities)")
+        for name in self.board.capabilities:
+            if not caps & (1 << CAPABILITY_NAMES.index(name)):
+                raise SessionError(f"{where} lacks capability {name}, which its board file "
+                                   f"{self.board.source} says it has (capabilities 0x{caps:04x})")
         if hello.control_period_ns not in (0, period_ns):
             raise SessionError(f"{where} was built for a control period of "
                                f"{hello.control_period_ns} ns, the bench runs {period_ns} ns")
@@ -324,14 +342,16 @@ class BenchSession:
             text += " (wrong baud rate or a noisy line?)"
         return text
 
-    def _push_parameters(self, params: dict[str, float]) -> None:
+    def _push_parameters(self, settings) -> None:
+        """SPEC 2.8.3 for each setting; an optional one the board does not know is logged
+        and skipped, anything else refused ends the session naming the parameter."""
         caps = self.board_hello.capabilities if self.board_hello is not None else 0xFFFF
-        for name, value in params.items():
-            if name == "telemetry_divider" and not caps & 0x4:
-                self._event("param_skipped", {"name": name, "reason": "the board does not "
-                                              "advertise the TELEMETRY capability"})
+        for setting in settings:
+            if setting.name == "telemetry_divider" and not caps & 0x4:
+                self._event("param_skipped", {"name": setting.name, "reason": "the board does "
+                                              "not advertise the TELEMETRY capability"})
                 continue
-            self.param_set(name, value)
+            self.param_set(setting.name, setting.value, optional=setting.optional)
 
     def _param_exchange(self, msg, pid: int, what: str) -> ParamValue:
         """Sends msg and waits param_wait_s for the PARAM_VALUE of pid, param_tries times."""
@@ -348,22 +368,32 @@ class BenchSession:
             f"{self._where()}: no PARAM_VALUE for {what} after {policy.param_tries} tries of "
             f"{wait:g} s"))
 
-    def param_set(self, name: str, value: float) -> float:
-        """PARAM_SET then PARAM_GET (SPEC 2.8.3): returns the value in force (float32)."""
-        pid = ParamId[name.upper()]
+    def param_set(self, name: str, value: float, optional: bool = False) -> float:
+        """PARAM_SET then PARAM_GET (SPEC 2.8.3): returns the value in force (float32). The
+        name and value are checked against the board file first. `optional`: an UNKNOWN answer
+        is logged and NaN returned instead of ending the session."""
+        problem = self.board.check_value(name, float(value))
+        if problem is not None:
+            raise SessionError(f"{self._where()}: {problem}")
+        pid = self.board.param(name).id
         where = self._where()
         answer = self._param_exchange(ParamSet(id=int(pid), value=float(value)), int(pid),
                                       f"parameter {name} (PARAM_SET)")
         status = answer.status
+        if status == 1 and optional:
+            text = f"{where} does not know optional parameter {name} (id {int(pid)}): not set"
+            print(f"hil: warning: {text}", file=sys.stderr)
+            self._event("param_unknown", {"name": name, "id": int(pid), "requested": float(value)})
+            return math.nan
         if status == 1:
             raise SessionError(f"{where} does not know parameter {name} (id {int(pid)}, "
-                               f"status 1 UNKNOWN)")
+                               f"status 1 UNKNOWN; board file {self.board.source})")
         if status != 0:
             raise SessionError(f"{where} refused parameter {name} = {value:g} (status {status} "
                                f"{_param_status(status)}; keeps {answer.value:g})")
         requested = _f32(value)
         clamped = _f32(answer.value) != requested
-        if clamped and pid == ParamId.CONTROL_PERIOD_S:
+        if clamped and pid == int(ParamId.CONTROL_PERIOD_S):
             raise SessionError(f"{where} was built for a control period of "
                                f"{round(answer.value * 1e9)} ns, the bench runs "
                                f"{round(self.period_s * 1e9)} ns (CONTROL_PERIOD_S {value:g} "

@@ -1,55 +1,51 @@
 """The parameters a session pushes to the board with PARAM_SET before the first period.
 
-A board must read its converters the way the bench's sensors write them, so
-the sensor scaling comes from the bench profile's sensor section (what a test
-engineer would copy from the transducer and ADC data sheets). Everything else
-is the profile's ``controller`` section, verbatim: gains, limits, and whatever
-motor model the board should assume. The plant's own motor parameters are
-deliberately not pushed: a plan that heats the winding must not tell the
-board about it.
+A board must read its converters the way the bench's sensors write them, so SPEC 8.1's
+required parameters (the control period, the sensor scaling, the pole pairs) come from the
+bench profile (hil.boards.standard.required_values): what a test engineer would copy from the
+transducer and ADC data sheets. Everything else is the board file's ``settings`` (and its
+``profile_settings`` for the profile in use): the board's own tuning for its motor. The
+plant's own motor parameters are deliberately not pushed: a plan that heats the winding must
+not tell the board about it.
 """
 from __future__ import annotations
 
-from plant_rt.profile import ControllerNames
-from protocol.messages import ParamId
+from pathlib import Path
 
-#: Board parameters, as a profile's `controller` section and a plan's `param_set` name them:
-#: protocol/c/hil_proto.h's hil_param_id names, lower case, without the HIL_PARAM_ prefix.
-READ_ONLY_PARAMS: tuple[str, ...] = (ParamId.CONTROL_STEP_CYCLES.name.lower(),)
-SETTABLE_PARAMS: tuple[str, ...] = tuple(p.name.lower() for p in ParamId
-                                         if p.name.lower() not in READ_ONLY_PARAMS)
-CONTROLLER_NAMES = ControllerNames(settable=SETTABLE_PARAMS, read_only=READ_ONLY_PARAMS)
+from hil.boards import BoardFile, Setting, load_board, spec_board
+from hil.boards.standard import required_values
 
-PHASE_PAIRS = {"ab": 0, "ac": 1, "bc": 2}
+#: The reference stub's board file: its parameters and its tuning for the paper's motor.
+STUB_BOARD_FILE = Path(__file__).resolve().parents[2] / "firmware_stub" / "board.yaml"
+#: Links that run the reference stub (in-process, over a pty, over slcan, in QEMU).
+STUB_LINKS = ("stub", "stub-pty", "stub-can", "qemu")
 
 
-def board_parameters(profile) -> dict[str, float]:
-    """Ordered name -> value (SI units), sensor scaling first."""
-    sensors = profile.sensors
-    params: dict[str, float] = {
-        "control_period_s": profile.control_period_s,
-        "current_a_per_count": sensors.current.a_per_count,
-        "current_offset_counts": sensors.current.offset_counts,
-        "current_phases": float(PHASE_PAIRS[sensors.current.phases]),
-        "vdc_v_per_count": sensors.dc_voltage.v_per_count,
-        "vdc_offset_counts": sensors.dc_voltage.offset_counts,
-        "encoder_counts_per_rev": float(4 * sensors.encoder.lines_per_rev),
-        "pole_pairs": float(profile.motor.pole_pairs),
-        # Checks compare estimates with the truth period by period; a profile for a
-        # board on a slow UART may lower the rate in its controller section.
-        "telemetry_divider": 1.0,
-    }
-    params.update(profile.controller)
-    return params
+def default_board(link: str | None) -> BoardFile:
+    """The board file a link gets when none is given: the stub's for the stub's links, else a
+    board written from SPEC.md alone (only the required parameters are pushed)."""
+    if (link or "stub") in STUB_LINKS:
+        return load_board(STUB_BOARD_FILE)
+    return spec_board()
+
+
+def board_parameters(profile, board: BoardFile | None = None,
+                     profile_label: str | None = None) -> list[Setting]:
+    """What the session pushes, in order: the required parameters (values from the profile),
+    then the board's settings. A setting of a required parameter replaces its value at its
+    place (e.g. a board that assumes the nominal current zero and calibrates it itself)."""
+    pushed: dict[str, Setting] = {name: Setting(name, value)
+                                  for name, value in required_values(profile).items()}
+    for setting in (board or spec_board()).settings_for(profile_label):
+        pushed[setting.name] = setting
+    return list(pushed.values())
 
 
 def load_bench_profile(path=None, overrides=None):
-    """plant_rt.load_profile with the `controller` section checked against the board's
-    parameter names and the `session` section against SPEC 2.8's keys (file, line and key
-    of a bad one)."""
+    """plant_rt.load_profile with the `session` section checked against SPEC 2.8's keys (file,
+    line and key of a bad one)."""
     from plant_rt.profile import load_profile
 
     from hil.session.policy import SESSION_SCHEMA
 
-    return load_profile(path, overrides, controller_names=CONTROLLER_NAMES,
-                        session_schema=SESSION_SCHEMA)
+    return load_profile(path, overrides, session_schema=SESSION_SCHEMA)

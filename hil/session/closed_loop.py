@@ -3,7 +3,7 @@ Python rather than from a plan: the same BenchSession that runs every plan (hand
 parameters, the period loop, the recorder), with the period's truth and telemetry handed back
 as arrays.
 
-    with ClosedLoop(controller={"flux_drift_cutoff_hz": 10.0}) as loop:
+    with ClosedLoop(settings={"flux_drift_cutoff_hz": 10.0}) as loop:
         loop.command("ekf", speed_rad_s=157.08)
         r = loop.run(0.5)          # r["speed_rad_s"], r["tm_speed_ekf_rad_s"], ...
 """
@@ -18,23 +18,21 @@ from plant_rt import TRUTH_FIELDS
 
 from hil.logs.recorder import TELEMETRY_FIELDS
 from hil.session.bench_session import BenchSession, SessionConfig
-from hil.session.board_params import load_bench_profile
+from hil.session.board_params import default_board, load_bench_profile
 
 SPEED_SOURCES = ("encoder", "conventional", "ekf")   # SPEC 9.7, by number
 
 
 class ClosedLoop:
-    """BenchSession on `link` (default the in-process stub) with the paper's profile, the
-    profile's `controller` section updated by `controller` and other sections by `overrides`."""
+    """BenchSession on `link` (default the in-process stub) with the paper's profile updated
+    by `overrides`, and the link's board file with `settings` pushed on top of its own."""
 
-    def __init__(self, controller: dict[str, float] | None = None,
+    def __init__(self, settings: dict[str, float] | None = None,
                  overrides: dict[str, Any] | None = None, link: str = "stub", seed: int = 0):
-        merged = dict(overrides or {})
-        if controller:
-            merged["controller"] = {**merged.get("controller", {}), **controller}
-        profile = load_bench_profile(overrides=merged or None)
+        profile = load_bench_profile(overrides=overrides or None)
         self.period_s = profile.control_period_s
-        self.session = BenchSession(profile, SessionConfig(link=link, seed=seed,
+        board = default_board(link).with_settings(settings)
+        self.session = BenchSession(profile, SessionConfig(link=link, seed=seed, board=board,
                                                           hold_cpu_latency=False))
 
     def __enter__(self) -> "ClosedLoop":

@@ -10,7 +10,7 @@ from typing import Any
 from configfile.dataclass_methods import dataclass
 from configfile.schema import NON_NEGATIVE, POSITIVE, POSITIVE_INT, obj
 
-CAPABILITY_NAMES = ("GATES", "DUTY", "TELEMETRY", "CAN")
+from hil.boards.standard import CAPABILITY_NAMES
 
 
 @dataclass(frozen=True)
