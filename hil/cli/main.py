@@ -275,13 +275,15 @@ def _log_command(args) -> int:
 
 def _plans_command(args) -> int:
     from hil.plans.format import load_plan
-    from hil.run.runner import expand_plan_paths
+    from hil.run.runner import board_for, check_plan_board, expand_plan_paths
     from configfile.source import ConfigError
 
     worst = EXIT_PASS
     for path in expand_plan_paths(args.paths):
         try:
             plan = load_plan(path)
+            # the board the plan runs on by default (its `board:`, else its link's)
+            check_plan_board(plan, board_for(plan, plan.link))
         except ConfigError as exc:
             print(f"INVALID  {exc}")
             worst = EXIT_ERROR
