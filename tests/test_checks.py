@@ -493,3 +493,31 @@ def test_ramp_lag_refuses_a_window_without_a_ramp():
         checks.ramp_lag_s(t, step, step)
     with pytest.raises(CheckError, match="constant"):
         checks.ramp_lag_s(t, np.ones(len(t)), np.ones(len(t)))
+
+
+def test_a_board_signal_that_is_nan_throughout_fails_the_check_naming_it():
+    """SPEC 6.5: a board fills what it does not compute with NaN. A check on such a signal is a
+    verdict on the board (FAIL, naming the signal), not an error of the plan or the bench."""
+    t = _t(0.2)
+    sig = SignalSet([Signal("plant.speed_rpm", t, np.full(len(t), 1500.0), "rpm"),
+                     Signal("ctrl.speed_ekf_rad_s", t, np.full(len(t), np.nan), "rad/s")])
+    _, spec = _check("""
+name: EKF speed
+kind: final_value
+signal: ctrl.speed_ekf_rad_s
+average_s: 0.01
+limits: {low: 1490, high: 1510, unit: rpm}
+""")
+    r = evaluate_check(spec, sig, {})
+    assert r.outcome is Outcome.FAIL and r.measured is None
+    assert "reports no value for ctrl.speed_ekf_rad_s" in r.message
+    # a plant signal that turns NaN is still an error: the bench, not the board, is wrong
+    sig = SignalSet([Signal("plant.speed_rpm", t, np.full(len(t), np.nan), "rpm")])
+    _, spec = _check("""
+name: speed
+kind: final_value
+signal: plant.speed_rpm
+average_s: 0.01
+limits: {low: 1490, high: 1510, unit: rpm}
+""")
+    assert evaluate_check(spec, sig, {}).outcome is Outcome.ERROR

@@ -719,6 +719,18 @@ def result_unit(kind: CheckKind, role_units: Mapping[str, str]) -> str | None:
 # Evaluation                                                                   #
 # --------------------------------------------------------------------------- #
 
+def _unreported(windows: dict) -> str:
+    """The board's signals (ctrl.*) that are NaN throughout their window, named; '' if none."""
+    names = []
+    for w in windows.values():
+        name = getattr(w, "name", "")
+        values = getattr(w, "values", None)
+        if str(name).startswith("ctrl.") and values is not None and len(values) \
+                and bool(np.isnan(values).all()):
+            names.append(str(name))
+    return ", ".join(names)
+
+
 def evaluate_check(spec: "CheckStep", signals: SignalSet, marks: Mapping[str, float],
                    now_s: float | None = None,
                    results: Mapping[str, CheckResult] | None = None,
@@ -812,6 +824,15 @@ def evaluate_check(spec: "CheckStep", signals: SignalSet, marks: Mapping[str, fl
     details["measured_native"] = m.value
     details["native_unit"] = m.unit
     if math.isnan(m.value):
+        unreported = _unreported(sig)
+        if unreported:
+            # What the board sent is NaN (SPEC 6.5: a value it does not compute): the board
+            # does not meet the check; the plan and the bench did their part.
+            return CheckResult(spec.name, spec.check_kind, Outcome.FAIL, None, unit, limits,
+                               f"{where}: the board reports no value for {unreported} in the "
+                               f"window (NaN: not computed by this board)", window,
+                               spec.signals, spec.line, details, plot=spec.plot,
+                               role=check_role, note=note)
         return error(m.message or "the measurement is not a number")
     try:
         measured = limits.to_limit_unit(m.value, m.unit)
