@@ -2,7 +2,8 @@
 no compensation in the stub removes do to its flux observer, at each plan's operating point.
 Prints the values written into test_plans/0[1-6]*.yaml's descriptions and `profile_limits`.
 
-The errors (plant_rt/profiles/paper-hardware.yaml against the board's controller section):
+The errors (plant_rt/profiles/paper-hardware.yaml against what the stub's board file,
+firmware_stub/board.yaml, tells the board on that profile; read from both files at import):
 the winding is warm (R = 0.5592 ohm) where the board keeps 0.466, and the current reading is
 0.5 % high, so the observer's R i is short by dR = 0.5592 - 1.005 x 0.466; the DC-link reading
 is high by e_v = (1.008 v + 0.6 V) / v - 1. The current offsets are calibrated at start-up
@@ -48,17 +49,49 @@ from __future__ import annotations
 
 import math
 
-R_WARM_OHM = 0.5592
-R_BOARD_OHM = 0.466
-CURRENT_GAIN = 1.005
-VDC_GAIN, VDC_OFFSET_V = 1.008, 0.6
-L_H = 4.8e-3
-PSI_F_WB = 0.0928
-DAMPING = 1e-4
-DRIFT_W0 = 2 * math.pi * 10.0
-POLE_PAIRS = 1
-DEVICE_DROP_V = 1.5             # compensated by the board with its nominal value, unscaled
-RS_ID_VDC_V = 70.0              # the link while the board identifies R (before any sag)
+
+
+def _modelled() -> dict:
+    """The values this model is made of, read from what it models: the hardware-like profile
+    (the plant) and what the stub's board file tells the board on it (SPEC 8.1's default for
+    a parameter it does not set)."""
+    from hil.boards.standard import SPEC_DEFAULTS
+    from hil.session.board_params import board_parameters, default_board, load_bench_profile
+    from plant_rt.profiles import __file__ as profiles_init
+
+    from pathlib import Path
+
+    hw = load_bench_profile(Path(profiles_init).parent / "paper-hardware.yaml")
+    told = {s.name: s.value for s in board_parameters(hw, default_board("stub"), "paper-hardware")}
+
+    def board(name: str) -> float:
+        return told.get(name, SPEC_DEFAULTS[name])
+
+    vdc = hw.sensors.dc_voltage
+    return {
+        "r_warm_ohm": hw.motor.resistance_ohm, "r_board_ohm": board("stator_resistance_ohm"),
+        "current_gain": hw.sensors.current.gain, "vdc_gain": vdc.gain,
+        # the board reads (count - its offset) x scale: the plant's offset it does not know
+        "vdc_offset_v": (vdc.offset_counts - board("vdc_offset_counts")) * vdc.v_per_count,
+        "l_h": hw.motor.inductance_d_h, "psi_f_wb": hw.motor.flux_linkage_wb,
+        "damping": hw.motor.damping_nm_per_rad_s, "pole_pairs": hw.motor.pole_pairs,
+        "drift_w0": 2 * math.pi * board("flux_drift_cutoff_hz"),
+        "device_drop_v": hw.inverter.device_drop_v, "rs_id_vdc_v": hw.dc_link.source_voltage_v,
+    }
+
+
+_M = _modelled()
+R_WARM_OHM = _M["r_warm_ohm"]
+R_BOARD_OHM = _M["r_board_ohm"]
+CURRENT_GAIN = _M["current_gain"]
+VDC_GAIN, VDC_OFFSET_V = _M["vdc_gain"], _M["vdc_offset_v"]
+L_H = _M["l_h"]
+PSI_F_WB = _M["psi_f_wb"]
+DAMPING = _M["damping"]
+DRIFT_W0 = _M["drift_w0"]
+POLE_PAIRS = _M["pole_pairs"]
+DEVICE_DROP_V = _M["device_drop_v"]  # compensated by the board with its nominal value, unscaled
+RS_ID_VDC_V = _M["rs_id_vdc_v"]      # the link while the board identifies R (before any sag)
 RS_ID_SIGMA_OHM = 0.5e-3        # the identification's spread, 1 sigma (docs/stub.md)
 
 

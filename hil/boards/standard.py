@@ -43,8 +43,39 @@ class ParamSpec:
         return None
 
 
+#: SPEC 8.1's defaults: what a board starts with (the reference system's values).
+SPEC_DEFAULTS: dict[str, float] = {
+    "control_period_s": 5e-05,
+    "current_a_per_count": 0.01220703125,
+    "current_offset_counts": 2048,
+    "vdc_v_per_count": 0.0244140625,
+    "vdc_offset_counts": 0,
+    "encoder_counts_per_rev": 4096,
+    "current_phases": 0,
+    "pole_pairs": 1,
+    "stator_resistance_ohm": 0.466,
+    "stator_inductance_h": 0.0048,
+    "magnet_flux_wb": 0.0928,
+    "flux_ref_wb": 0.099,
+    "flux_band_wb": 0.00233,
+    "torque_band_nm": 0.0586,
+    "torque_limit_nm": 2.0,
+    "speed_kp_nm_per_rad_s": 0.0503,
+    "speed_ki_nm_per_rad": 0.79,
+    "speed_lpf_cutoff_hz": 20,
+    "ekf_k1": 0.0568456,
+    "ekf_k2": 32.0846,
+    "ekf_k3": 0.446429,
+    "flux_drift_cutoff_hz": 10,
+    "telemetry_divider": 10,
+    "overcurrent_a": 20,
+    "encoder_loss_timeout_s": 0.01,
+    "control_step_cycles": 0,
+}
+
 def _std(name: str, pid: int, unit: str, description: str, **kw) -> ParamSpec:
-    return ParamSpec(name=name, id=pid, unit=unit, description=description, **kw)
+    return ParamSpec(name=name, id=pid, unit=unit, description=description,
+                     default=SPEC_DEFAULTS[name], **kw)
 
 
 #: SPEC 8's table, ids 1-59, in id order.
