@@ -199,3 +199,20 @@ def test_a_session_on_the_board_built_with_asan_and_ubsan():
     arrays, faults = _speed_step(f"exec:{BOARD / 'build' / 'spec_minimal.san'}?args=--overcurrent-a+5", 300)
     assert [f.code for f in faults] == [FaultCode.OVERCURRENT]
     assert len(arrays["plant.i_a"][1]) == 300
+
+
+def test_torque_mode_is_followed_clamped_and_other_speed_sources_refused():
+    link = _started()
+    try:
+        _exchange(link, Command(1 | 2, 0, 0.0, 0.5, 0.0))           # torque mode, 0.5 Nm
+        _, telemetry = _exchange(link, _sample(0))
+        assert telemetry.torque_ref_nm == pytest.approx(0.5)
+        _exchange(link, Command(1 | 2, 0, 0.0, 9.0, 0.0))           # clamped to 12 A x 0.1392 Nm/A
+        _, telemetry = _exchange(link, _sample(1))
+        assert telemetry.torque_ref_nm == pytest.approx(1.5 * 0.0928 * 12.0, rel=1e-6)
+        fault, status = _exchange(link, Command(1, 2, 100.0, 0.0, 0.0))  # EKF: no estimator
+        assert (fault.code, fault.value) == (FaultCode.PROTOCOL, 2.0)
+        assert (status.state, status.fault_code) == (ControllerState.FAULT, FaultCode.PROTOCOL)
+        assert _exchange(link, _sample(2))[0] == Gates(2, 0)
+    finally:
+        link.close()
