@@ -4,8 +4,9 @@
 =======================================  ==========================================================
 ``exec:PATH[?args=...&transport=T]``      any executable speaking the protocol on stdin/stdout,
                                            run on a pseudo-terminal; T = serial (default) or slcan
-``lib:PATH.so[?transport=serial|can]``    a firmware built as a shared library with the firmware
-                                           ABI of protocol/c/hil_fw_abi.h, in-process
+``lib:PATH.so[?args=...&transport=T]``    a firmware built as a shared library with the firmware
+                                           ABI of protocol/c/hil_fw_abi.h, in-process, a private
+                                           copy per session; T = serial (default) or can
 ``qemu:IMAGE.elf[?machine=M&cpu=C]``      any Cortex-M image following docs/porting.md in QEMU
                                            (default mps2-an386, cortex-m4; -icount shift=7)
 ``serial:PORT[?baud=N]``                  a real board on any pyserial port or URL
@@ -45,7 +46,7 @@ from hil.links.stub_library import EXECUTABLE_PATH, LIBRARY_PATH, ensure_built
 ENTRY_POINT_GROUP = "hil.links"
 
 LINK_CHOICES = ("stub", "stub-pty", "stub-can", "qemu", "exec:PATH[?args=...&transport=serial|slcan]",
-                "lib:PATH.so", "qemu:IMAGE.elf[?machine=mps2-an386]", "serial:PORT[?baud=N]",
+                "lib:PATH.so[?args=...&transport=serial|can]", "qemu:IMAGE.elf[?machine=mps2-an386]", "serial:PORT[?baud=N]",
                 "can:INTERFACE:CHANNEL[?bitrate=N]")
 
 STDERR_LINES = 10
@@ -153,15 +154,35 @@ class _StderrTail:
 
 
 def _query(spec: str, rest: str, allowed: tuple[str, ...]) -> tuple[str, dict[str, str]]:
+    """PATH?key=value&... -> (PATH, options); every link type's options go through here.
+    An unknown or repeated option is refused, naming it (and the nearest known one)."""
     target, _, query = rest.partition("?")
-    options = dict(parse_qsl(query, keep_blank_values=True))
+    pairs = parse_qsl(query, keep_blank_values=True)
+    options = dict(pairs)
     unknown = sorted(set(options) - set(allowed))
     if unknown:
-        raise LinkError(f"link '{spec}': unknown option(s) {', '.join(unknown)}; "
+        from difflib import get_close_matches
+
+        hints = [f"'{name}'" for u in unknown for name in get_close_matches(u, allowed, n=1)]
+        hint = f" (did you mean {', '.join(hints)}?)" if hints else ""
+        raise LinkError(f"link '{spec}': unknown option(s) {', '.join(unknown)}{hint}; "
                         f"expected {', '.join(allowed) or 'none'}")
+    if len(options) != len(pairs):
+        twice = sorted({k for k, _ in pairs if [p for p, _ in pairs].count(k) > 1})
+        raise LinkError(f"link '{spec}': option(s) {', '.join(twice)} given more than once")
     if not target:
         raise LinkError(f"link '{spec}': no path given")
     return target, options
+
+
+def _args_option(spec: str, options: dict[str, str]) -> list[str]:
+    """The ``args=`` option split like a shell's words (exec: and lib: alike)."""
+    import shlex
+
+    try:
+        return shlex.split(options.get("args", ""))
+    except ValueError as exc:
+        raise LinkError(f"link '{spec}': args: {exc}") from None
 
 
 # ------------------------------------------------------------------ built-in link types
@@ -176,12 +197,7 @@ def _exec_link(rest: str, spec: str) -> BoardConnection:
         raise LinkError(f"link '{spec}': executable '{path}' does not exist")
     if not os.access(path, os.X_OK):
         raise LinkError(f"link '{spec}': '{path}' is not executable (chmod +x?)")
-    import shlex
-
-    try:
-        args = shlex.split(options.get("args", ""))
-    except ValueError as exc:
-        raise LinkError(f"link '{spec}': args: {exc}") from None
+    args = _args_option(spec, options)
     return spawn_on_pty(spec, [str(path.resolve()), *args], transport)
 
 
@@ -221,8 +237,12 @@ def spawn_on_pty(spec: str, argv: list[str], transport: str = "serial") -> Board
 def _lib_link(rest: str, spec: str) -> BoardConnection:
     from hil.links.firmware_library import open_firmware_library
 
-    target, options = _query(spec, rest, ("transport",))
-    link = open_firmware_library(target, transport=options.get("transport", "serial"), url=spec)
+    target, options = _query(spec, rest, ("args", "transport"))
+    transport = options.get("transport", "serial")
+    if transport not in ("serial", "can"):
+        raise LinkError(f"link '{spec}': transport '{transport}'; expected serial or can")
+    link = open_firmware_library(target, transport=transport, url=spec,
+                                 args=_args_option(spec, options))
     # In-process: the firmware answers within the call, so every wait is 0 (SPEC 2.8).
     return BoardConnection(spec, link, hello_wait_s=0.0, answer_wait_min_s=0.0)
 

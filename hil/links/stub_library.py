@@ -57,11 +57,13 @@ def load_library() -> ctypes.CDLL:
 
 class StubLibraryLink(FirmwareLibraryLink):
     """The stub firmware in this process (link string ``stub``): ``lib:`` on libhilstub.so,
-    through the same public firmware ABI as any user's library (protocol/c/hil_fw_abi.h)."""
+    through the same public firmware ABI as any user's library (protocol/c/hil_fw_abi.h).
+    Its state lives in the instance memory the bench owns, so every session shares the
+    process's one load of the library (no private copy, unlike ``lib:``)."""
 
     def __init__(self, transport: str = "serial") -> None:
         ensure_built()
-        super().__init__(LIBRARY_PATH, transport=transport, url="stub")
+        super().__init__(LIBRARY_PATH, transport=transport, url="stub", private=False)
 
     @property
     def _instance(self):
