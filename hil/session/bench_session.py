@@ -32,6 +32,7 @@ from protocol.messages import (
 from hil.links.registry import BoardConnection, connect
 from hil.logs.recorder import COMMAND_FIELDS, Recorder
 from hil.session.board_params import board_parameters
+from hil.session.board_state import BoardState
 from hil.session.cpu_latency import CpuLatencyHold
 from hil.session.errors import SessionError
 from hil.session.link_tap import LinkTap, tappable
@@ -121,6 +122,7 @@ class BenchSession:
         self.board_hello: Hello | None = None
         self.board_params: dict[str, float] = {}
         self.faults: list[Fault] = []
+        self.board_state = BoardState(self.period_s, self.recorder)   # from STATUS: ready or not
         self.events: list[tuple[float, str, dict]] = []
         #: Called as fn(t_s, kind, data) for every event as it is recorded (the console, a
         #: live view). A listener must be quick: it runs inside the period loop.
@@ -390,6 +392,8 @@ class BenchSession:
         unknown = set(changes) - set(COMMAND_FIELDS)
         if unknown:
             raise ValueError(f"unknown command field(s): {', '.join(sorted(unknown))}")
+        if "enable" in changes and bool(changes["enable"]) != self.command_state.enable:
+            self.board_state.enable_changed(self.plant.period)  # not ready until it says so
         self.command_state = replace(self.command_state, **changes)
         msg = self.command_state.to_message(self.board_params.get("flux_ref_wb", 0.0))
         self.conn.link.send(msg)
@@ -427,6 +431,7 @@ class BenchSession:
                 print(f"hil: warning: {_fault_text(msg, self.period_s)}", file=sys.stderr)
         elif t is Status:
             self.recorder.step_value("ctrl.fault_code", msg.period, msg.fault_code)
+            self.board_state.on_status(msg.state, msg.fault_code, msg.period, self.plant.period)
             self._event("board_status", {"state": msg.state, "fault_code": msg.fault_code,
                                          "period": msg.period})
         elif t is Gates or t is Duty:
