@@ -191,3 +191,71 @@ def test_status_period_from_the_board_is_checked():
     assert not board.ready and "state 250 (unknown" in board.describe()
     board.on_status(FAULT, 1, period=402, arrival_period=402)
     assert board.faulted and "fault code 1 OVERCURRENT" in board.describe()
+
+
+# ------------------------------------------------------------------ plan validation
+READY_PLAN = """\
+name: demo
+steps:
+  - command: {enable: true, speed_source: encoder, speed_ref_rpm: 1500}
+  - wait_ready: {timeout_s: 2}
+  - run: {duration_s: 0.1}
+  - check:
+      name: speed after ready
+      kind: final_value
+      signal: plant.speed_rpm
+      window: {from: ready, duration_s: 0.05}
+      limits: {low: 0, unit: rpm}
+"""
+
+
+def _format_error(text: str):
+    from configfile.source import ConfigError
+
+    with pytest.raises(ConfigError) as info:
+        parse_plan(text, "plan.yaml")
+    assert info.value.source == "plan.yaml"
+    return info.value
+
+
+def test_wait_ready_step_loads_with_its_line_and_mark():
+    from hil.plans.format import WaitReadyStep
+
+    plan = parse_plan(READY_PLAN, "plan.yaml")
+    step = plan.steps[1]
+    assert isinstance(step, WaitReadyStep)
+    assert (step.line, step.timeout_s, step.mark) == (4, 2.0, "ready")
+    assert "ready" in plan.marks
+    assert plan.max_sim_duration_s() == pytest.approx(2.1)
+    named = parse_plan(READY_PLAN.replace("{timeout_s: 2}", "{timeout_s: 2, mark: calibrated}")
+                       .replace("from: ready", "from: calibrated"), "plan.yaml")
+    assert named.steps[1].mark == "calibrated"
+
+
+@pytest.mark.parametrize("change, line, key, message", [
+    ("{}", 4, "steps[1].wait_ready", "missing required key 'timeout_s'"),
+    ("{timeout: 2}", 4, "steps[1].wait_ready.timeout",
+     "unknown key 'timeout'; did you mean 'timeout_s'?"),
+    ("{timeout_s: 0}", 4, "steps[1].wait_ready.timeout_s", "must be greater than 0"),
+    ("{timeout_s: 2, mark: start}", 4, "steps[1].wait_ready.mark", "'start' is a reserved mark name"),
+    ("{timeout_s: 2, mark: [a]}", 4, "steps[1].wait_ready.mark", "expected a string"),
+])
+def test_wait_ready_errors_name_line_and_key(change, line, key, message):
+    err = _format_error(READY_PLAN.replace("{timeout_s: 2}", change))
+    assert (err.line, err.key) == (line, key)
+    assert message in err.message
+
+
+def test_a_second_wait_ready_needs_its_own_mark():
+    text = READY_PLAN.replace("  - run: {duration_s: 0.1}\n",
+                              "  - run: {duration_s: 0.1}\n  - wait_ready: {timeout_s: 1}\n")
+    err = _format_error(text)
+    assert (err.line, err.key) == (6, "steps[3].wait_ready")
+    assert "mark 'ready' is already set at line 4" in err.message and "its own 'mark: NAME'" in err.message
+    parse_plan(text.replace("{timeout_s: 1}", "{timeout_s: 1, mark: ready_again}"), "plan.yaml")
+
+
+def test_ready_mark_is_not_set_before_the_wait():
+    text = READY_PLAN.replace("  - wait_ready: {timeout_s: 2}\n", "") + "  - wait_ready: {timeout_s: 2}\n"
+    err = _format_error(text)
+    assert err.key == "steps[2].check.window.from" and "mark 'ready' is not set before this step" in err.message
