@@ -34,6 +34,7 @@ from hil.plans.format import (
 from hil.logs.recorder import SENSOR_FIELDS, TELEMETRY_FIELDS, COMMAND_FIELDS
 from hil.reports.html import slug, write_reports, write_summary
 from hil.session.bench_session import BenchSession, SessionConfig, SessionError
+from hil.session.bench_session import _fault_text as fault_text    # SPEC 2.9's wording
 from hil.session.board_state import fault_name
 from hil.plans.signals import SignalSet
 from configfile.dataclass_methods import dataclass
@@ -443,9 +444,9 @@ def _wait_ready(step: WaitReadyStep, session: BenchSession, state: _RunState, ad
                 f"{max(t_ready - t_start, 0.0) * 1e3:.1f} ms after the wait began; mark '{step.mark}'")
     if board.faulted:
         fault = next((f for f in reversed(session.faults) if f.code == board.fault_code), None)
-        value = f", value {fault.value:.4g}" if fault is not None else ""
-        message = (f"the board reported FAULT {board.fault_code} {fault_name(board.fault_code)}{value} "
-                   f"before it was ready ({board.describe()})")
+        what = (fault_text(fault, period) if fault is not None else
+                f"board FAULT {board.fault_code} {fault_name(board.fault_code)} (STATUS)")
+        message = f"the board was not ready: {what}; its state is {board.describe()}"
         state.steps.append(StepResult(step.index, step.kind, Outcome.ERROR, step.line, t_start,
                                       session.plant.t_s, message))
         raise SessionError(f"{where}: {message}")
