@@ -47,8 +47,9 @@ class SpeedSource(IntEnum):
 
 class ControllerState(IntEnum):
     IDLE = 0
-    RUNNING = 1
+    RUNNING = 1      # enabled and controlling: ready (SPEC.md 2 item 5)
     FAULT = 2
+    STARTING = 3     # enabled, start-up phase (alignment, calibration): not yet controlling
 
 
 class FaultCode(IntEnum):

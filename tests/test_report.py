@@ -28,7 +28,7 @@ from hil.plans.checks import evaluate_check
 from hil.plans.outcome import CheckResult, Outcome, PlanResult, StepResult, plan_outcome
 from hil.run.runner import skipped_remainder
 from hil.plans.format import (CheckStep, CommandStep, DcLinkStep, LoadStep, MarkStep, ParamSetStep, Plan, RunStep,
-                      WaitUntilStep, load_plan, parse_plan)
+                      WaitReadyStep, WaitUntilStep, load_plan, parse_plan)
 from hil.reports.html import junit_xml, slug, write_reports, write_summary
 from hil.reports.svg import polyline_points
 from hil.plans.signals import Signal, SignalSet
@@ -94,7 +94,7 @@ class SpeedLoopModel:
 
 def model_run(plan: Plan, link: str | None = None, mode: str | None = None,
               out_dir: Path | None = None) -> tuple[PlanResult, SignalSet]:
-    """Runs a plan's command / load / run / wait_until / mark / check steps on the model."""
+    """Runs a plan's command / load / run / wait_until / wait_ready / mark / check steps on the model."""
     m = SpeedLoopModel()
     marks: dict[str, float] = {"start": 0.0}
     steps: list[StepResult] = []
@@ -125,6 +125,8 @@ def model_run(plan: Plan, link: str | None = None, mode: str | None = None,
                 outcome, message = Outcome.TIMEOUT, f"not met within {step.timeout_s:g} s: {step.describe()}"
         elif isinstance(step, MarkStep):
             marks[step.name] = m.k * PERIOD_S
+        elif isinstance(step, WaitReadyStep):
+            marks[step.mark] = m.k * PERIOD_S   # the model has no start-up: ready at once
         elif isinstance(step, CheckStep):
             r = evaluate_check(step, m.signals(), marks, now_s=(m.k - 1) * PERIOD_S, results=checks)
             checks[r.name] = r
@@ -359,7 +361,7 @@ def test_plugin_plan_item_fails_on_timeout(pytester, fake_runner):
     result = pytester.runpytest("test_plans", *PLUGIN_ARGS)
     n = len(load_plan(PAPER_STEP_PLAN).checks)
     result.assert_outcomes(failed=n + 1)
-    result.stdout.fnmatch_lines(["*plan 'speed-step-sensored' ended TIMEOUT: step 2 (wait_until, line *)*"])
+    result.stdout.fnmatch_lines(["*plan 'speed-step-sensored' ended TIMEOUT: step 3 (wait_until, line *)*"])
 
 
 def test_bench_fixture_opens_and_closes_a_bench(pytester, monkeypatch):

@@ -55,7 +55,7 @@ typedef struct {
     uint8_t transport;
     uint8_t seq;
     uint8_t shutdown;
-    uint8_t reported_state; /* last state sent in STATUS */
+    uint8_t reported_state; /* last state sent in STATUS (ctl_reported_state) */
     uint8_t peer_version_bad; /* the bench's HELLO named another version: answer only HELLO */
     size_t out_len;
     uint8_t out[OUT_BYTES];
@@ -139,9 +139,9 @@ static void emit_status(hil_stub *s, uint32_t period)
     hil_msg m;
     m.type = HIL_MSG_STATUS;
     m.u.status.period = period;
-    m.u.status.state = s->core.st.state;
+    m.u.status.state = ctl_reported_state(&s->core);
     m.u.status.fault_code = s->core.st.fault_code;
-    s->reported_state = s->core.st.state;
+    s->reported_state = m.u.status.state;
     emit(s, &m);
 }
 
@@ -198,6 +198,11 @@ static void on_sample(hil_stub *s, const hil_sample *sample)
         emit(s, &m);
     }
     report_fault(s);
+    if (ctl_reported_state(&s->core) != s->reported_state) {
+        /* the start-up ended in this step: this SAMPLE's answer is the first that controls,
+         * so the board is ready from this period on (SPEC.md 6.8) */
+        emit_status(s, sample->period);
+    }
 }
 
 static void on_command(hil_stub *s, const hil_command *cmd)
@@ -208,7 +213,7 @@ static void on_command(hil_stub *s, const hil_command *cmd)
         report_fault(s);
         return;
     }
-    if (s->core.st.state != s->reported_state) {
+    if (ctl_reported_state(&s->core) != s->reported_state) {
         emit_status(s, s->next_period); /* applies from the next SAMPLE on */
     }
 }

@@ -229,6 +229,13 @@ void ctl_trip(ctl *c, uint8_t fault_code, float value, uint32_t period)
     c->st.fault_period = period;
 }
 
+uint8_t ctl_reported_state(const ctl *c)
+{
+    /* st.state stays RUNNING through the start-up (the step tells the two apart by
+     * st.startup); the wire tells the bench the drive is not controlling yet */
+    return (c->st.state == HIL_STATE_RUNNING && c->st.startup) ? (uint8_t)HIL_STATE_STARTING : c->st.state;
+}
+
 /* Flux from the encoder angle for a surface-magnet motor, and every flux-based
  * estimator aligned with it. */
 static void track_encoder(ctl *c, const clarke_out *i)
@@ -498,7 +505,7 @@ uint8_t ctl_step(ctl *c, const hil_sample *s, hil_telemetry *tm)
     tm->period = s->period;
     tm->sector = sector;
     tm->speed_source = source;
-    tm->state = st->state;
+    tm->state = ctl_reported_state(c);
     tm->gates = st->answer_duty ? CTL_GATES_PWM : gates;
     tm->speed_feedback_rad_s = feedback;
     tm->speed_encoder_rad_s = st->enc.speed_rad_s;

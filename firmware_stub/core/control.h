@@ -169,6 +169,11 @@ int ctl_set_command(ctl *c, const hil_command *cmd);
 /* Latches a fault: switches off from now on, state FAULT until disabled. */
 void ctl_trip(ctl *c, uint8_t fault_code, float value, uint32_t period);
 
+/* The state the board reports in STATUS and TELEMETRY (SPEC.md 9.4): STARTING while the
+ * start-up after an enable (zero calibration, resistance identification) runs, RUNNING once
+ * the drive controls (ready), else st.state. */
+uint8_t ctl_reported_state(const ctl *c);
+
 /* One control period. Returns the gates to apply until the next SAMPLE, or,
  * when it leaves c->st.answer_duty at 1 (FOC while running), the duties in
  * c->st.duty are the answer instead (the return value is then 0). With

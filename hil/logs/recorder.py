@@ -35,8 +35,9 @@ TELEMETRY_FIELDS = ("sector", "speed_source", "state", "gates", "speed_feedback_
 COMMAND_FIELDS = ("enable", "speed_source", "speed_ref_rpm", "torque_mode", "torque_ref_nm",
                   "flux_ref_wb")
 #: Step signals every run has (0 until they change): the board's latched fault code (FAULT,
-#: STATUS) and the Modbus bits of the injected faults in effect (hil/faults/injector.py).
-STEP_SIGNALS = ("ctrl.fault_code", "fault.active_bits")
+#: STATUS), the Modbus bits of the injected faults in effect (hil/faults/injector.py), and the
+#: board's state from STATUS and whether it is ready (hil/session/board_state.py).
+STEP_SIGNALS = ("ctrl.fault_code", "fault.active_bits", "board.state", "board.ready")
 
 
 #: The C codec's row writers (one call a period's rows, one a TELEMETRY), or None.

@@ -309,6 +309,20 @@ class WaitUntilStep(StepBase):
 
 
 @dataclass(frozen=True, kw_only=True)
+class WaitReadyStep(StepBase):
+    """Run until the board reports it is ready (STATUS RUNNING after its start-up, SPEC.md 2
+    item 5); TIMEOUT after timeout_s naming its state, ERROR at once when it reports FAULT.
+    Names the moment it became ready `mark` (a check window anchor)."""
+
+    kind: ClassVar[str] = "wait_ready"
+    timeout_s: float
+    mark: str = "ready"
+
+    def describe(self) -> str:
+        return f"board ready (timeout {self.timeout_s:g} s), mark '{self.mark}'"
+
+
+@dataclass(frozen=True, kw_only=True)
 class MarkStep(StepBase):
     """Names the current simulated time, for check windows."""
 
@@ -347,7 +361,7 @@ class CheckStep(StepBase):
 
 
 Step = Union[CommandStep, ParamSetStep, LoadStep, DcLinkStep, PlantParamStep, FaultStep,
-             RunStep, WaitUntilStep, MarkStep, CheckStep]
+             RunStep, WaitUntilStep, WaitReadyStep, MarkStep, CheckStep]
 
 
 @dataclass(frozen=True)
@@ -386,7 +400,8 @@ class Plan:
 
     @property
     def marks(self) -> tuple[str, ...]:
-        return tuple(s.name for s in self.steps if isinstance(s, MarkStep))
+        return tuple(s.name if isinstance(s, MarkStep) else s.mark for s in self.steps
+                     if isinstance(s, (MarkStep, WaitReadyStep)))
 
     def signals_used(self) -> set[str]:
         used: set[str] = set()
@@ -406,7 +421,7 @@ class Plan:
     def max_sim_duration_s(self) -> float:
         """Simulated time the plan takes at most (every wait_until to its timeout)."""
         return self.min_sim_duration_s() + sum(s.timeout_s for s in self.steps
-                                               if isinstance(s, WaitUntilStep))
+                                               if isinstance(s, (WaitUntilStep, WaitReadyStep)))
 
 
 # --------------------------------------------------------------------------- #
@@ -447,6 +462,7 @@ STEP_SCHEMAS: dict[str, dict] = {
                         "value": NUMBER, "tolerance": POSITIVE, "unit": {"type": "string"},
                         "timeout_s": POSITIVE, "hold_s": NON_NEGATIVE},
                        ["signal", "comparison", "value", "timeout_s"]),
+    "wait_ready": obj({"timeout_s": POSITIVE, "mark": NAME}, ["timeout_s"]),
     "mark": NAME,
     "check": {"type": "object", "required": ["name", "kind"],
               "properties": {"name": NAME, "kind": {"enum": list(CHECK_KINDS)}}},
@@ -686,13 +702,23 @@ class _BuildState:
                              tolerance=None if "tolerance" not in body else float(body["tolerance"]),
                              hold_s=float(body.get("hold_s", 0.0)))
 
+    def _wait_ready(self, body: dict, path: KeyPath, common: dict) -> WaitReadyStep:
+        mark = body.get("mark", "ready")
+        where = path + ("mark",) if "mark" in body else path
+        self.new_mark(mark, where, common["line"],
+                      "" if "mark" in body else "; a second wait_ready needs its own 'mark: NAME'")
+        return WaitReadyStep(**common, timeout_s=float(body["timeout_s"]), mark=mark)
+
     def _mark(self, body: str, path: KeyPath, common: dict) -> MarkStep:
-        if body in RESERVED_MARKS:
-            raise self.err(path, f"'{body}' is a reserved mark name ({', '.join(RESERVED_MARKS)})")
-        if body in self.marks:
-            raise self.err(path, f"mark '{body}' is already set at line {self.marks[body]}")
-        self.marks[body] = common["line"]
+        self.new_mark(body, path, common["line"])
         return MarkStep(**common, name=body)
+
+    def new_mark(self, name: str, path: KeyPath, line: int, hint: str = "") -> None:
+        if name in RESERVED_MARKS:
+            raise self.err(path, f"'{name}' is a reserved mark name ({', '.join(RESERVED_MARKS)})")
+        if name in self.marks:
+            raise self.err(path, f"mark '{name}' is already set at line {self.marks[name]}{hint}")
+        self.marks[name] = line
 
     def _check(self, body: dict, path: KeyPath, common: dict) -> CheckStep:
         kind = CHECK_KINDS[body["kind"]]
@@ -790,7 +816,7 @@ class _BuildState:
             elif same:
                 hint = f"; signals of '{group}': {', '.join(same)}"
             else:
-                hint = "; signal names start with plant., sensor., ctrl. or cmd."
+                hint = "; signal names start with plant., sensor., ctrl., cmd. or board."
             raise self.err(path, f"unknown signal '{name}'{hint}")
         return SIGNAL_CATALOG[name]
 
@@ -888,7 +914,7 @@ def _opt_float(x: Any) -> float | None:
 
 
 __all__ = ["Plan", "Step", "StepBase", "CommandStep", "ParamSetStep", "LoadStep", "DcLinkStep",
-           "PlantParamStep", "FaultStep", "RunStep", "WaitUntilStep", "MarkStep", "CheckStep",
+           "PlantParamStep", "FaultStep", "RunStep", "WaitUntilStep", "WaitReadyStep", "MarkStep", "CheckStep",
            "Window", "PlotSpec", "ProfileRef", "CHECK_ROLES", "resolve_profile", "named_profile_path",
            "named_profile_names", "load_plan", "parse_plan", "plan_files", "looks_like_plan", "BOARD_PARAMS",
            "PLANT_PARAMS", "FAULTS", "PROFILE_NAMES", "SPEED_SOURCES", "MODES", "WAIT_COMPARISONS", "LOAD_TYPES",

@@ -452,8 +452,19 @@ def html_report(result: PlanResult, signals: SignalSet, plots: Sequence = ()) ->
     if result.marks:
         parts.append("<h2>Marks</h2><p>" + ", ".join(f"{e(k)} = {v:.6f} s" for k, v in result.marks.items())
                      + "</p>")
+    if result.extra.get("board_states"):
+        parts.append(_board_states_html(result.extra["board_states"]))
     parts.append('<p class="muted">hil-bench report</p></body></html>\n')
     return "".join(parts)
+
+
+def _board_states_html(changes: Sequence[Mapping]) -> str:
+    """The board's STATUS state changes (SPEC 9.4), the moments it became ready flagged."""
+    rows = "".join(f"<tr><td class=\"num\">{float(c['t_s']):.6f}</td><td class=\"num\">{int(c['period'])}</td>"
+                   f"<td>{escape(str(c['name']))}{' (ready)' if c.get('ready') else ''}</td>"
+                   f"<td class=\"num\">{int(c.get('fault_code', 0))}</td></tr>" for c in changes)
+    return ("<h2>Board states</h2><table><tr><th>t (s)</th><th>period</th><th>state</th>"
+            "<th>fault code</th></tr>" + rows + "</table>")
 
 
 # --------------------------------------------------------------------------- #

@@ -1,8 +1,8 @@
 """Runs plans: steps in simulated time against a session, then checks, then reports.
 
 A plan's steps execute in order on one BenchSession. Stimuli and commands act
-at the current period; ``run`` and ``wait_until`` advance periods (a wait's
-timeout is enforced to the period, in simulated time); ``mark`` names the
+at the current period; ``run``, ``wait_until`` and ``wait_ready`` advance periods
+(a wait's timeout is enforced to the period, in simulated time); ``mark`` names the
 current time; a ``check`` remembers when it was reached and is evaluated at the
 end over the recorded signals (its window may reach back to any mark).
 
@@ -29,11 +29,13 @@ from hil.plans.checks import evaluate_check
 from hil.plans.outcome import CheckResult, Outcome, PlanResult, StepResult, plan_outcome
 from hil.plans.format import (
     PROFILE_NAMES, CheckStep, ProfileRef, resolve_profile, CommandStep, DcLinkStep, FaultStep, LoadStep, MarkStep, ParamSetStep,
-    Plan, PlantParamStep, RunStep, WaitUntilStep, load_plan, plan_files,
+    Plan, PlantParamStep, RunStep, WaitReadyStep, WaitUntilStep, load_plan, plan_files,
 )
 from hil.logs.recorder import SENSOR_FIELDS, TELEMETRY_FIELDS, COMMAND_FIELDS
 from hil.reports.html import slug, write_reports, write_summary
 from hil.session.bench_session import BenchSession, SessionConfig, SessionError
+from hil.session.bench_session import _fault_text as fault_text    # SPEC 2.9's wording
+from hil.session.board_state import fault_name
 from hil.plans.signals import SignalSet
 from configfile.dataclass_methods import dataclass
 from configfile.source import ConfigError
@@ -134,6 +136,9 @@ def live_getter(session: BenchSession, name: str) -> Callable[[], float]:
     if group == "cmd" and fld in COMMAND_FIELDS:
         i = COMMAND_FIELDS.index(fld) + 1
         return lambda: rec.command_rows[-1][i] if rec.command_rows else math.nan
+    if name in rec.step_rows:       # board.state, board.ready, ctrl.fault_code, ...: 0 until set
+        rows = rec.step_rows[name]
+        return lambda: rows[-1][1] if rows else 0.0
     raise ConfigError(f"signal '{name}' is not recorded live", None)
 
 
@@ -355,6 +360,8 @@ def _run(plan: Plan, opts: RunOptions) -> tuple[PlanResult, SignalSet]:
         extra["link_counters"] = session.link_counters() if session.conn is not None else {}
         extra["board_faults"] = [{"code": f.code, "period": f.period, "value": f.value}
                                  for f in session.faults]
+        # every change of the board's STATUS state; "ready": true marks when it became ready
+        extra["board_states"] = list(session.board_state.changes)
         if session.fault_injector is not None:
             extra["faults_injected"] = list(session.fault_injector.history)
         if session.rt_stats:
@@ -439,6 +446,8 @@ def _execute(plan: Plan, session: BenchSession, stimuli: Stimuli, state: _RunSta
                                               t_start, session.plant.t_s, message))
                 raise PlanTimeout(f"step {step.index + 1} (wait_until, line {step.line}): {message}")
             message = f"met after {ran * period * 1e3:.1f} ms"
+        elif isinstance(step, WaitReadyStep):
+            message = _wait_ready(step, session, state, advance, t_start)
         elif isinstance(step, MarkStep):
             state.marks[step.name] = session.plant.t_s
             session.event("mark", name=step.name)
@@ -447,6 +456,39 @@ def _execute(plan: Plan, session: BenchSession, stimuli: Stimuli, state: _RunSta
             state.checks_reached.append((step, max(session.plant.t_s - period, 0.0)))
         state.steps.append(StepResult(step.index, step.kind, outcome, step.line, t_start,
                                       session.plant.t_s, message))
+
+
+def _wait_ready(step: WaitReadyStep, session: BenchSession, state: _RunState, advance,
+                t_start: float) -> str:
+    """Runs until the board's STATUS says it is ready (hil/session/board_state.py); marks that
+    moment. TIMEOUT names the state the board is in; a FAULT ends the step at once (ERROR)."""
+    board = session.board_state
+    period = session.period_s
+
+    def done() -> bool:
+        return board.ready or board.faulted
+
+    if not done():
+        advance(round(step.timeout_s / period), done)
+    where = f"step {step.index + 1} (wait_ready, line {step.line})"
+    if board.ready:
+        t_ready = board.ready_t_s
+        state.marks[step.mark] = t_ready
+        session.event("mark", name=step.mark, at_s=t_ready, period=board.ready_period)
+        return (f"board ready at t = {t_ready:.6f} s (period {board.ready_period}), "
+                f"{max(t_ready - t_start, 0.0) * 1e3:.1f} ms after the wait began; mark '{step.mark}'")
+    if board.faulted:
+        fault = next((f for f in reversed(session.faults) if f.code == board.fault_code), None)
+        what = (fault_text(fault, period) if fault is not None else
+                f"board FAULT {board.fault_code} {fault_name(board.fault_code)} (STATUS)")
+        message = f"the board was not ready: {what}; its state is {board.describe()}"
+        state.steps.append(StepResult(step.index, step.kind, Outcome.ERROR, step.line, t_start,
+                                      session.plant.t_s, message))
+        raise SessionError(f"{where}: {message}")
+    message = f"board not ready within {step.timeout_s:g} s: its state is {board.describe()}"
+    state.steps.append(StepResult(step.index, step.kind, Outcome.TIMEOUT, step.line, t_start,
+                                  session.plant.t_s, message))
+    raise PlanTimeout(f"{where}: {message}")
 
 
 # --------------------------------------------------------------------------- pytest / Python API

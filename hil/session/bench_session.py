@@ -32,6 +32,7 @@ from protocol.messages import (
 from hil.links.registry import BoardConnection, connect
 from hil.logs.recorder import COMMAND_FIELDS, Recorder
 from hil.session.board_params import board_parameters, default_board
+from hil.session.board_state import BoardState
 from hil.session.cpu_latency import CpuLatencyHold
 from hil.session.errors import SessionError
 from hil.session.link_tap import LinkTap, tappable
@@ -130,6 +131,7 @@ class BenchSession:
         # the board file's profile_settings key: the given label, else the profile file's stem
         self.profile_label = self.config.profile_label or str(profile.source)
         self.faults: list[Fault] = []
+        self.board_state = BoardState(self.period_s, self.recorder)   # from STATUS: ready or not
         self.events: list[tuple[float, str, dict]] = []
         #: Called as fn(t_s, kind, data) for every event as it is recorded (the console, a
         #: live view). A listener must be quick: it runs inside the period loop.
@@ -420,6 +422,8 @@ class BenchSession:
         unknown = set(changes) - set(COMMAND_FIELDS)
         if unknown:
             raise ValueError(f"unknown command field(s): {', '.join(sorted(unknown))}")
+        if "enable" in changes and bool(changes["enable"]) != self.command_state.enable:
+            self.board_state.enable_changed(self.plant.period)  # not ready until it says so
         self.command_state = replace(self.command_state, **changes)
         msg = self.command_state.to_message(self.board_params.get("flux_ref_wb", 0.0))
         self.conn.link.send(msg)
@@ -457,6 +461,7 @@ class BenchSession:
                 print(f"hil: warning: {_fault_text(msg, self.period_s)}", file=sys.stderr)
         elif t is Status:
             self.recorder.step_value("ctrl.fault_code", msg.period, msg.fault_code)
+            self.board_state.on_status(msg.state, msg.fault_code, msg.period, self.plant.period)
             self._event("board_status", {"state": msg.state, "fault_code": msg.fault_code,
                                          "period": msg.period})
         elif t is Gates or t is Duty:

@@ -76,8 +76,9 @@ typedef enum {
     HIL_SPEED_EKF = 2           /* eq. (16)-(23) */
 } hil_speed_source;
 
-/* Controller states (STATUS.state) */
-typedef enum { HIL_STATE_IDLE = 0, HIL_STATE_RUNNING = 1, HIL_STATE_FAULT = 2 } hil_state;
+/* Controller states (STATUS.state, SPEC.md 9.4): STARTING = enabled, start-up phase
+ * (alignment, calibration) not done; RUNNING = controlling, ready */
+typedef enum { HIL_STATE_IDLE = 0, HIL_STATE_RUNNING = 1, HIL_STATE_FAULT = 2, HIL_STATE_STARTING = 3 } hil_state;
 
 /* FAULT codes */
 typedef enum {
