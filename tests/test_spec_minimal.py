@@ -21,7 +21,10 @@ from protocol.messages import (Command, ControllerState, Duty, FaultCode, Gates,
 
 from hil.links.firmware_library import FirmwareLibraryLink
 from hil.session.bench_session import BenchSession, SessionConfig, SessionError
-from hil.session.board_params import load_bench_profile
+from hil.session.board_params import default_board, load_bench_profile
+from hil.plans.format import load_plan
+from hil.plans.outcome import Outcome
+from hil.run.runner import run_plan
 
 REPO = Path(__file__).resolve().parents[1]
 BOARD = REPO / "examples" / "spec_minimal"
@@ -64,9 +67,25 @@ def test_one_hil_run_of_two_profiles_over_one_lib_gets_fresh_globals_for_each(tm
     assert "hil_fw_create returned NULL" not in proc.stdout + proc.stderr
 
 
+PAPER_PLANS = sorted((REPO / "test_plans").glob("0[1-6]_*.yaml"))
+
+
+@pytest.mark.parametrize("plan_path", PAPER_PLANS, ids=lambda p: p.stem)
+def test_every_paper_plan_on_both_profiles_ends_in_a_verdict_on_a_spec_only_board(plan_path, tmp_path):
+    """A board that knows only SPEC's required parameters, no board file: the bench pushes it
+    nothing else (no stub tuning), and each plan ends PASS or FAIL on the board's account, never
+    ERROR: what it does not compute (EKF, flux) it reports as NaN, and the checks say so."""
+    plan = load_plan(plan_path)
+    assert [r.label for r in plan.profiles] == ["paper", "paper-hardware"]
+    for ref in plan.profiles:
+        result, _ = run_plan(plan, link=f"lib:{LIB}", profile=ref, out_dir=tmp_path)
+        assert result.outcome in (Outcome.PASS, Outcome.FAIL), (ref.label, result.reason)
+        assert result.extra["board_file"]["source"] == "<no board file>"
+
+
 def _profile():
-    # paper.yaml's controller section names torque_limit_nm, which this board does not know
-    return load_bench_profile(None, overrides={"controller": None})
+    # lib: is not a stub link: without a board file only SPEC 8.1's parameters are pushed
+    return load_bench_profile(None)
 
 
 def _speed_step(link: str, periods: int = 1500):
@@ -107,8 +126,11 @@ def test_arguments_it_does_not_know_are_refused_naming_them():
 
 
 def test_a_parameter_that_is_not_pushed_ends_the_session_unknown():
+    # a board file that pushes torque_limit_nm, which this board does not know
+    board = default_board(f"lib:{LIB}").with_settings({"torque_limit_nm": 2.0})
     with pytest.raises(SessionError, match=r"does not know parameter torque_limit_nm \(id 23, status 1"):
-        with BenchSession(load_bench_profile(), SessionConfig(link=f"lib:{LIB}", hold_cpu_latency=False)):
+        with BenchSession(load_bench_profile(), SessionConfig(link=f"lib:{LIB}", hold_cpu_latency=False,
+                                                              board=board)):
             pass
 
 

@@ -4,7 +4,7 @@ On the paper-hardware profile the stub calibrates at its first enable: its curre
 (CURRENT_ZERO_CAL_PERIODS), then the stator resistance (RS_ID_PERIODS per level, two levels,
 then the bridge open for SPEC 8 row 67's 1 ms), reporting STARTING meanwhile and RUNNING from
 the first period that controls. The expected ready period is computed from the parameters the
-bench pushes (the profile's `controller` section) and the period, not measured. Everything
+bench pushes (the stub's board file on that profile) and the period, not measured. Everything
 runs in lockstep on the in-process stub: simulated time, nothing depends on the machine's load.
 """
 from __future__ import annotations
@@ -17,7 +17,8 @@ import pytest
 
 from hil.plans.format import parse_plan
 from hil.plans.outcome import Outcome
-from hil.run.runner import profile_for, run_plan
+from hil.run.runner import board_for, profile_for, profile_ref, run_plan
+from hil.session.board_params import board_parameters
 from hil.session.board_state import BoardState
 from protocol.messages import ControllerState
 
@@ -34,8 +35,10 @@ def _start_up_periods(plan) -> int:
     """Periods from the enable to the first controlling period, from what the bench pushes."""
     profile = profile_for(plan)
     t = profile.control_period_s
-    zero_cal = int(profile.controller["current_zero_cal_periods"])
-    rs_id = int(profile.controller["rs_id_periods"])
+    ref = profile_ref(plan)
+    told = {s.name: s.value for s in board_parameters(profile, board_for(plan, "stub"), ref.label)}
+    zero_cal = int(told["current_zero_cal_periods"])
+    rs_id = int(told["rs_id_periods"])
     assert zero_cal > 0 and rs_id > 0        # the profile this test is about calibrates
     return zero_cal + 2 * rs_id + math.ceil(round(RS_ID_OFF_S / t, 9))
 

@@ -613,6 +613,8 @@ def _m_compare(ctx: CheckContext) -> Measurement:
         r = ctx.results.get(name)
         if r is None:
             raise CheckError(f"check '{name}' has no result yet")
+        if (r.measured is None or not math.isfinite(r.measured)) and r.outcome is Outcome.FAIL:
+            raise DependencyFailed(f"check '{name}' failed without a measured value: {r.message}")
         if r.measured is None or not math.isfinite(r.measured):
             raise CheckError(f"check '{name}' has no finite measured value ({r.outcome.value})")
     a, b = ctx.results[a_name], ctx.results[b_name]
@@ -719,14 +721,19 @@ def result_unit(kind: CheckKind, role_units: Mapping[str, str]) -> str | None:
 # Evaluation                                                                   #
 # --------------------------------------------------------------------------- #
 
+class DependencyFailed(CheckError):
+    """A check built on another check's value, which failed on the board's account."""
+
+
 def _unreported(windows: dict) -> str:
-    """The board's signals (ctrl.*) that are NaN throughout their window, named; '' if none."""
+    """The board's signals (ctrl.*) with NaN in their window (SPEC 6.5: not computed), named;
+    '' if none."""
     names = []
     for w in windows.values():
         name = getattr(w, "name", "")
         values = getattr(w, "values", None)
         if str(name).startswith("ctrl.") and values is not None and len(values) \
-                and bool(np.isnan(values).all()):
+                and bool(np.isnan(values).any()):
             names.append(str(name))
     return ", ".join(names)
 
@@ -758,6 +765,13 @@ def evaluate_check(spec: "CheckStep", signals: SignalSet, marks: Mapping[str, fl
 
     def error(message: str) -> CheckResult:
         return CheckResult(spec.name, spec.check_kind, Outcome.ERROR, None, unit, spec_limits,
+                           f"{where}: {message}", window, spec.signals, spec.line, plot=spec.plot,
+                           role=check_role, note=note)
+
+    def board_verdict(message: str) -> CheckResult:
+        """The board did not give what the check needs: FAIL (INFO for a finding)."""
+        outcome = Outcome.INFO if check_role == "finding" else Outcome.FAIL
+        return CheckResult(spec.name, spec.check_kind, outcome, None, unit, spec_limits,
                            f"{where}: {message}", window, spec.signals, spec.line, plot=spec.plot,
                            role=check_role, note=note)
 
@@ -800,7 +814,12 @@ def evaluate_check(spec: "CheckStep", signals: SignalSet, marks: Mapping[str, fl
     ctx = CheckContext(spec, window, sig, full, const, dict(spec.args), results or {})
     try:
         m = kind.measure(ctx)
+    except DependencyFailed as exc:
+        return board_verdict(str(exc))
     except (CheckError, UnitError, ValueError, ArithmeticError) as exc:
+        if _unreported(sig):        # garbage in from the board: its verdict, not a plan error
+            return board_verdict(f"the board reports no value for {_unreported(sig)} in the "
+                                 f"window (NaN: not computed by this board): {exc}")
         return error(str(exc))
 
     limits = spec_limits
@@ -808,6 +827,12 @@ def evaluate_check(spec: "CheckStep", signals: SignalSet, marks: Mapping[str, fl
         details = dict(m.details)
         details["measured_native"] = m.value
         details["native_unit"] = m.unit
+        if math.isnan(m.value) and _unreported(sig):
+            return CheckResult(spec.name, spec.check_kind, Outcome.INFO, None, m.unit, None,
+                               f"finding: the board reports no value for {_unreported(sig)} "
+                               f"in the window (NaN: not computed by this board)", window,
+                               spec.signals, spec.line, details, plot=spec.plot,
+                               role=check_role, note=note)
         if math.isnan(m.value):
             return error(m.message or "the measurement is not a number")
         shown = "inf" if math.isinf(m.value) else f"{m.value:.6g}"
