@@ -67,3 +67,19 @@ def test_duty_legs_is_type_0x0f_and_0x0e_stays_unknown():
     """0x0E is the unknown type of the vector files (SPEC 5): it must stay undefined."""
     assert MsgType.DUTY_LEGS == 0x0F and 0x0E not in {int(t) for t in MsgType}
     assert LEG_C == 0x04
+
+
+def test_spec_example_is_the_handbuilt_vector():
+    """SPEC 10's DUTY_LEGS example, as printed, is hb_duty_legs of handbuilt.txt byte for byte."""
+    import re
+    from pathlib import Path
+
+    from protocol.vector_file import HANDBUILT_PATH, load
+
+    spec = (Path(__file__).resolve().parents[1] / "protocol" / "SPEC.md").read_text()
+    example = spec[spec.index("DUTY_LEGS, period 123456"):spec.index("(These bytes are in the vector")]
+    wire = re.search(r"^wire  ([0-9A-F ]+)$", example, re.M).group(1)
+    can = re.search(r"identifier 0x12F, data\s+`([0-9A-F ]+)`", example).group(1)
+    vector = load(HANDBUILT_PATH).messages["hb_duty_legs"]
+    assert bytes.fromhex(wire) == vector.serial
+    assert [(0x12F, bytes.fromhex(can))] == vector.can

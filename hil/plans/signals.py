@@ -33,8 +33,9 @@ _CTRL = {
 _CMD = {"speed_ref_rpm": "rpm", "enable": "1", "speed_source": "1", "torque_mode": "1",
         "torque_ref_nm": "Nm", "flux_ref_wb": "Wb"}
 # Step signals (hil/logs/recorder.py step_value): the board's latched fault code from FAULT and
-# STATUS (0 before any), and the Modbus bits of the injected faults in effect (hil/faults/injector.py).
-_STEP = {"ctrl.fault_code": "1", "fault.active_bits": "1"}
+# STATUS (0 before any), the Modbus bits of the injected faults in effect (hil/faults/injector.py),
+# and the leg enables of a DUTY_LEGS board's answers (bit x = leg x switching; 0 before the first).
+_STEP = {"ctrl.fault_code": "1", "fault.active_bits": "1", "ctrl.leg_enable": "1"}
 
 #: Every signal a plan may name, with its unit. Angles are wrapped to (-pi, pi].
 SIGNAL_CATALOG: dict[str, str] = {

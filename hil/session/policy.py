@@ -10,7 +10,7 @@ from typing import Any
 from configfile.dataclass_methods import dataclass
 from configfile.schema import NON_NEGATIVE, POSITIVE, POSITIVE_INT, obj
 
-CAPABILITY_NAMES = ("GATES", "DUTY", "TELEMETRY", "CAN")
+CAPABILITY_NAMES = ("GATES", "DUTY", "TELEMETRY", "CAN", "DUTY_LEGS")  # bit i = name i (SPEC 9.1)
 
 
 @dataclass(frozen=True)
