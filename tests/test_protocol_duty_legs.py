@@ -54,7 +54,8 @@ def test_can_period_extension_over_13_bits_in_both_codecs(lib):
     """A board answering every 1000 periods for 100 000 periods: each DUTY_LEGS carries only
     period & 0x1FFF, and both receivers give back the full period (SPEC 7.3, n = 13), as long as
     one full period (GATES) started the count."""
-    sent = [Gates(0, 0)] + [DutyLegs(p, (p & 0xFFFF, 0, 65535), p % 8) for p in range(1000, 100_001, 1000)]
+    sent = [Gates(0, 0)] + [DutyLegs(p, (p & 0xFFFF, 0, 65535), p // 1000 % 8)
+                            for p in range(1000, 100_001, 1000)]
     frames = [f for m in sent for f in can_pack(m, CONTROLLER)]
     rx = CanReassembler()
     got = [rx.feed(i, d) for i, d in frames]
