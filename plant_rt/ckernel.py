@@ -35,7 +35,7 @@ from pathlib import Path
 
 BUILD_DIR = Path(__file__).resolve().parent / "c" / "build"
 #: The interface this module speaks (the extension's ABI constant).
-ABI = 5
+ABI = 6
 
 
 def extension_path() -> Path:

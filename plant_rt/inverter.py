@@ -17,7 +17,9 @@ Timing within a control period [0, T): the command of the previous period holds 
 computation delay, the new one after it. A duty command is a centre-aligned PWM period aligned
 with the control period (carrier valley at the sampling instant t_k): the high side of a leg is
 on during [T (1 - d)/2, T (1 + d)/2), the low side the rest of the period. Dead time delays
-every switch's turn-on edge by dead_time_s. The result is a list of intervals with a constant
+every switch's turn-on edge by dead_time_s. A duty command may float legs (its leg enables,
+``legs``, bit x for leg x): a floated leg has both switches off for the whole period and conducts
+through its diodes like any open leg. The result is a list of intervals with a constant
 switch word, integrated one after the other (segment by segment, never averaged).
 """
 from __future__ import annotations
@@ -38,6 +40,10 @@ SWITCH_C_LOW = 0x20
 
 LEG_BITS = ((SWITCH_A_HIGH, SWITCH_A_LOW), (SWITCH_B_HIGH, SWITCH_B_LOW),
             (SWITCH_C_HIGH, SWITCH_C_LOW))
+
+#: Leg enables of a duty command: bit x = leg x (a, b, c) switches; a leg whose bit is 0 is
+#: floated (both switches off all period).
+ALL_LEGS = 0x07
 
 #: Table 2 switching states (s_a s_b s_c), 1 = high side on, as gate words.
 VECTOR_GATES = {
@@ -91,30 +97,44 @@ def driven_vector(word: int, vdc: float) -> tuple[float, float, float, float] | 
 
 
 class Command:
-    """A controller command: a gate word or three duty cycles. Immutable, comparable."""
+    """A controller command: a gate word, or three duty cycles with their leg enables
+    (``legs``, ALL_LEGS unless legs are floated). Immutable, comparable."""
 
-    __slots__ = ("gates", "duty")
+    __slots__ = ("gates", "duty", "legs")
 
-    def __init__(self, gates: int | None = None, duty: tuple[float, float, float] | None = None):
+    def __init__(self, gates: int | None = None, duty: tuple[float, float, float] | None = None,
+                 legs: int = ALL_LEGS):
         self.gates = gates
         self.duty = duty
+        self.legs = legs
 
     def __eq__(self, other: object) -> bool:
         return (isinstance(other, Command) and self.gates == other.gates
-                and self.duty == other.duty)
+                and self.duty == other.duty and self.legs == other.legs)
 
     def __hash__(self) -> int:
-        return hash((self.gates, self.duty))
+        return hash((self.gates, self.duty, self.legs))
 
     def __repr__(self) -> str:
         if self.duty is None:
             return f"Command(gates={self.gates!r})"
+        if self.legs != ALL_LEGS:
+            return f"Command(duty={self.duty!r}, legs={self.legs:#05b})"
         return f"Command(duty={self.duty!r})"
 
     @staticmethod
-    def parse(gates: int | None, duty) -> "Command | None":
+    def parse(gates: int | None, duty, legs: int | None = None) -> "Command | None":
         if gates is not None and duty is not None:
             raise ValueError("step() takes gates or duty, not both")
+        if legs is not None:
+            try:
+                mask = operator.index(legs)
+            except TypeError:
+                mask = -1
+            if isinstance(legs, bool) or not 0 <= mask <= ALL_LEGS:
+                raise ValueError(f"legs must be an int 0..7 of leg enables (bit x = leg x), got {legs!r}")
+            if duty is None:
+                raise ValueError("legs (leg enables) go with duty, not with gates")
         if gates is not None:
             try:
                 word = operator.index(gates)        # numpy integers too, not floats
@@ -132,7 +152,7 @@ class Command:
             if not (0.0 <= values[0] <= 1.0 and 0.0 <= values[1] <= 1.0
                     and 0.0 <= values[2] <= 1.0):
                 raise ValueError(f"duty must be three numbers 0..1, got {duty!r}")
-            return Command(duty=values)
+            return Command(duty=values, legs=ALL_LEGS if legs is None else mask)
         return None
 
     def edges(self, switch: int, period_s: float) -> tuple[bool, tuple[float, ...]]:
@@ -140,6 +160,8 @@ class Command:
         leg, low = divmod(switch, 2)
         if self.duty is None:
             return bool(self.gates & LEG_BITS[leg][low]), ()
+        if not self.legs >> leg & 1:
+            return False, ()                # a floated leg: both switches off all period
         d = self.duty[leg]
         if d <= 0.0:
             return bool(low), ()
@@ -212,7 +234,7 @@ class SwitchTimeline:
         if self.dead_time_s == 0.0 and (self.delay_s == 0.0 or old == new):
             if new.duty is None:
                 return self._stuck([(0.0, T, new.gates)])
-            return self._stuck(self._duty_sweep(new.duty))
+            return self._stuck(self._duty_sweep(new.duty, new.legs))
         return self.words(self.switch_windows(old, new))
 
     def words(self, windows: list[list[tuple[float, float]]]) -> list[tuple[float, float, int]]:
@@ -229,7 +251,7 @@ class SwitchTimeline:
         applied, stuck bits not. Advances the dead-time memory: call once per period."""
         T = self.period_s
         if new.duty is not None and (self.delay_s == 0.0 or old == new):
-            return self._duty_windows(new.duty)
+            return self._duty_windows(new.duty, new.legs)
         delay = min(self.delay_s, T)
         td = self.dead_time_s
         actual: list[list[tuple[float, float]]] = []
@@ -276,13 +298,17 @@ class SwitchTimeline:
             actual.append(switch_on)
         return actual
 
-    def _duty_windows(self, duty: tuple[float, float, float]) -> list[list[tuple[float, float]]]:
+    def _duty_windows(self, duty: tuple[float, float, float], legs: int = ALL_LEGS
+                      ) -> list[list[tuple[float, float]]]:
         """switch_windows() for a duty command with no delay in play (the common case): the
         command of switch j is on in one centre window (high side) or around it (low side);
         turn-on edges come td later, a command that has been on since the last period keeps
-        the rise it had (dead time across the period boundary)."""
+        the rise it had (dead time across the period boundary). A floated leg (its bit of
+        ``legs`` 0) has no window and forgets its rises."""
         if self.kernel is not None:
-            return self.kernel.duty_windows(self.period_s, self.dead_time_s, duty, self._rise)
+            if legs == ALL_LEGS:
+                return self.kernel.duty_windows(self.period_s, self.dead_time_s, duty, self._rise)
+            return self.kernel.duty_windows(self.period_s, self.dead_time_s, duty, self._rise, legs)
         T = self.period_s
         td = self.dead_time_s
         rise = self._rise
@@ -290,6 +316,12 @@ class SwitchTimeline:
         for x in range(3):
             d = duty[x]
             jh, jl = 2 * x, 2 * x + 1
+            if not legs >> x & 1:
+                out.append([])
+                out.append([])
+                rise[jh] = None
+                rise[jl] = None
+                continue
             if d >= 1.0:
                 r = rise[jh]
                 a = td if r is None else max(r + td, 0.0)
@@ -323,13 +355,17 @@ class SwitchTimeline:
             out.append(low)
         return out
 
-    def _duty_sweep(self, duty: tuple[float, float, float]) -> list[tuple[float, float, int]]:
-        """One centre-aligned period without dead time: legs switch at T (1 -+ d) / 2."""
+    def _duty_sweep(self, duty: tuple[float, float, float], legs: int = ALL_LEGS
+                    ) -> list[tuple[float, float, int]]:
+        """One centre-aligned period without dead time: legs switch at T (1 -+ d) / 2; a
+        floated leg keeps both switches off."""
         T = self.period_s
         word = 0
         toggles = []
         for x, d in enumerate(duty):
             hi, lo = LEG_BITS[x]
+            if not legs >> x & 1:
+                continue
             if d >= 1.0:
                 word |= hi
             elif d <= 0.0:

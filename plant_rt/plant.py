@@ -236,9 +236,13 @@ class Plant:
     def control_period_s(self) -> float:
         return self._T
 
-    def step(self, gates: int | None = None, duty=None) -> None:
-        """Integrates one control period with the new command (None keeps the previous one)."""
+    def step(self, gates: int | None = None, duty=None, legs: int | None = None) -> None:
+        """Integrates one control period with the new command (None keeps the previous one).
+        ``legs`` goes with ``duty``: the leg enables (bit x = leg x; a leg whose bit is 0 is
+        floated, both switches off all period), None for all three legs switching."""
         old = self._cmd
+        if legs is not None:
+            duty = Command.parse(gates, duty, legs)  # the duty Command (or the ValueError)
         if (gates is None and self._duty_period is not None
                 and (duty is not None or old.duty is not None)
                 and self._duty_step(old, old if duty is None else duty)):
@@ -247,6 +251,8 @@ class Plant:
             new = old
         elif duty is None and type(gates) is int and 0 <= gates < 64:
             new = GATE_COMMANDS[gates]
+        elif type(duty) is Command:
+            new = duty
         else:
             new = Command.parse(gates, duty)
         self._cmd = new
@@ -299,7 +305,7 @@ class Plant:
         vdc = self.dc_link.source_v
         done = self._duty_period(self._duty_cfg, Command, old.gates, old.duty, new,
                                  self._timeline._rise, vdc, self._pa, self._pb, self._w, self._th,
-                                 self._revs, self.period, self._load_seg, self._bw)
+                                 self._revs, self.period, self._load_seg, self._bw, old.legs)
         if done is None:
             return False
         if len(done) == 2:

@@ -4,8 +4,9 @@ identifier = base_id + 0x20 * sender_role + type. SAMPLE, GATES, DUTY and
 every payload of at most 8 bytes travel in one frame; HELLO, COMMAND,
 TELEMETRY and FAULT are split over numbered frames whose first data byte is
 (counter << 4) | index. The CAN CRC replaces the serial CRC, and there is no
-sequence number: SAMPLE carries the low 8 bits of its period and DUTY the low
-16, which the receiver extends from the last period it saw.
+sequence number: SAMPLE carries the low 8 bits of its period, DUTY the low 16
+and DUTY_LEGS the low 13 (its leg enables take the word's top 3 bits), which
+the receiver extends from the last period it saw.
 """
 from __future__ import annotations
 
@@ -15,7 +16,7 @@ from protocol.codec import (
     HELLO_FIXED_SIZE, MAX_PAYLOAD, PAYLOAD_SIZES, ProtocolError, decode_payload, encode_payload,
     pack_adc40,
 )
-from protocol.messages import NAME_MAX, Duty, MsgType, Role, Sample
+from protocol.messages import LEGS_ALL, NAME_MAX, Duty, DutyLegs, MsgType, Role, Sample
 
 DEFAULT_BASE_ID = 0x100
 ROLE_STRIDE = 0x20
@@ -30,6 +31,9 @@ _KNOWN_TYPES = frozenset(int(t) for t in MsgType)
 
 _SAMPLE_CAN = struct.Struct("<BIBH")   # period low 8, adc40 low 32, adc40 high 8, encoder
 _DUTY_CAN = struct.Struct("<4H")       # period low 16, duty x3
+_DUTY_LEGS_CAN = _DUTY_CAN             # period low 13 | leg_enable << 13, duty x3
+DUTY_LEGS_PERIOD_BITS = 13
+_DUTY_LEGS_PERIOD_MASK = (1 << DUTY_LEGS_PERIOD_BITS) - 1
 
 COUNTER_NAMES = ("messages_ok", "sequence_errors", "unknown_types", "length_errors", "ignored_frames")
 
@@ -62,12 +66,24 @@ def can_pack(msg, sender_role: int, base_id: int = DEFAULT_BASE_ID, seq: int = 0
         except (struct.error, TypeError, ValueError):
             encode_payload(msg)  # raises the ProtocolError naming the field
             raise
+    if msg_type == MsgType.DUTY_LEGS:
+        return [(can_id, _pack_duty_legs(msg))]
     payload = encode_payload(msg)
     if msg_type not in SEGMENTED_TYPES:
         return [(can_id, payload)]
     counter = (seq & 0x0F) << 4
     return [(can_id, bytes((counter | i,)) + payload[start:start + SEGMENT_DATA])
             for i, start in enumerate(range(0, len(payload), SEGMENT_DATA))]
+
+
+def _pack_duty_legs(msg: DutyLegs) -> bytes:
+    """Period low 13 bits and the three leg enables in one u16, then the duties (SPEC 7.2)."""
+    encode_payload(msg)  # checks every field's range, naming the one that does not fit
+    if msg.leg_enable & ~LEGS_ALL:
+        raise ProtocolError(f"DUTY_LEGS.leg_enable = 0x{msg.leg_enable:02x}: reserved bits 3-7 must be 0 "
+                            f"(the CAN frame carries bits 0-2 only)")
+    word = (msg.period & _DUTY_LEGS_PERIOD_MASK) | msg.leg_enable << DUTY_LEGS_PERIOD_BITS
+    return _DUTY_LEGS_CAN.pack(word, *msg.duty)
 
 
 class _Slot:
@@ -164,6 +180,13 @@ class CanReassembler:
                               low >> 24 | (high & 0x0F) << 8, encoder, high >> 4)
             low16, d0, d1, d2 = _DUTY_CAN.unpack(data)
             return Duty(self._extend(low16, 16), (d0, d1, d2))
+        if msg_type == MsgType.DUTY_LEGS:
+            if len(data) != 8:
+                self.length_errors += 1
+                return None
+            word, d0, d1, d2 = _DUTY_LEGS_CAN.unpack(data)
+            period = self._extend(word & _DUTY_LEGS_PERIOD_MASK, DUTY_LEGS_PERIOD_BITS)
+            return DutyLegs(period, (d0, d1, d2), word >> DUTY_LEGS_PERIOD_BITS)
         try:
             msg = decode_payload(msg_type, data)
         except ProtocolError:

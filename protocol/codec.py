@@ -22,7 +22,7 @@ from cobs.cobs import decode as _cobs_decode
 from cobs.cobs import encode as _cobs_encode
 
 from protocol.messages import (
-    NAME_MAX, PROTOCOL_VERSION, Command, Duty, Fault, Gates, Heartbeat, Hello, MsgType, ParamGet,
+    NAME_MAX, PROTOCOL_VERSION, Command, Duty, DutyLegs, Fault, Gates, Heartbeat, Hello, MsgType, ParamGet,
     ParamSet, ParamValue, Sample, Shutdown, Status, Telemetry,
 )
 
@@ -53,6 +53,7 @@ _HELLO = struct.Struct("<BBHIB")        # + name bytes
 _SAMPLE = struct.Struct("<IIBH")        # period, adc40 low 32 bits, adc40 high 8 bits, encoder
 _GATES = struct.Struct("<IB")
 _DUTY = struct.Struct("<I3H")
+_DUTY_LEGS = struct.Struct("<I3HB")    # period, duty x3, leg_enable
 _COMMAND = struct.Struct("<BBfff")
 _TELEMETRY = struct.Struct("<IBBBB12f")
 _PARAM_SET = struct.Struct("<Hf")
@@ -70,6 +71,7 @@ PAYLOAD_SIZES: dict[int, int] = {
     MsgType.PARAM_SET: _PARAM_SET.size, MsgType.PARAM_GET: _PARAM_GET.size,
     MsgType.PARAM_VALUE: _PARAM_VALUE.size, MsgType.STATUS: _STATUS.size,
     MsgType.FAULT: _FAULT.size, MsgType.HEARTBEAT: _HEARTBEAT.size, MsgType.SHUTDOWN: 0,
+    MsgType.DUTY_LEGS: _DUTY_LEGS.size,
 }
 
 
@@ -100,6 +102,11 @@ def _enc_duty(m: Duty) -> bytes:
     return _DUTY.pack(m.period, d0, d1, d2)
 
 
+def _enc_duty_legs(m: DutyLegs) -> bytes:
+    d0, d1, d2 = m.duty
+    return _DUTY_LEGS.pack(m.period, d0, d1, d2, m.leg_enable)
+
+
 def _generic_encoder(st: struct.Struct, *names: str):
     get = attrgetter(*names)
     if len(names) == 1:
@@ -127,6 +134,7 @@ _PAYLOAD_ENCODERS = {
     Fault: _generic_encoder(_FAULT, "period", "code", "value"),
     Heartbeat: _generic_encoder(_HEARTBEAT, "counter"),
     Shutdown: lambda m: b"",
+    DutyLegs: _enc_duty_legs,
 }
 
 # Wire width of each field, to name the offending field when packing fails.
@@ -185,6 +193,7 @@ _FIELD_FORMATS: dict[type, dict[str, str]] = {
     Status: {"period": "I", "state": "B", "fault_code": "H"},
     Fault: {"period": "I", "code": "H", "value": "f"},
     Heartbeat: {"counter": "I"},
+    DutyLegs: {"period": "I", "duty": "H", "leg_enable": "B"},
 }
 
 
@@ -224,6 +233,13 @@ def _dec_duty(buf, off: int, n: int):
     return Duty(period, (d0, d1, d2))
 
 
+def _dec_duty_legs(buf, off: int, n: int):
+    if n != 11:
+        return None
+    period, d0, d1, d2, leg_enable = _DUTY_LEGS.unpack_from(buf, off)
+    return DutyLegs(period, (d0, d1, d2), leg_enable)
+
+
 def _generic_decoder(st: struct.Struct, cls):
     size = st.size
     unpack_from = st.unpack_from
@@ -249,6 +265,7 @@ _PAYLOAD_DECODERS = {
     MsgType.FAULT: _generic_decoder(_FAULT, Fault),
     MsgType.HEARTBEAT: _generic_decoder(_HEARTBEAT, Heartbeat),
     MsgType.SHUTDOWN: lambda buf, off, n: Shutdown() if n == 0 else None,
+    MsgType.DUTY_LEGS: _dec_duty_legs,
 }
 # Plain int keys: a dict lookup with an int hashes the same but skips the enum's __hash__.
 _PAYLOAD_DECODERS = {int(k): v for k, v in _PAYLOAD_DECODERS.items()}

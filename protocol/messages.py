@@ -32,6 +32,7 @@ class MsgType(IntEnum):
     FAULT = 0x0B
     HEARTBEAT = 0x0C
     SHUTDOWN = 0x0D
+    DUTY_LEGS = 0x0F  # 0x0E stays undefined: the vector files use it as the unknown type
 
 
 class Role(IntEnum):
@@ -112,6 +113,14 @@ CAP_GATES = 0x0001
 CAP_DUTY = 0x0002
 CAP_TELEMETRY = 0x0004
 CAP_CAN = 0x0008
+CAP_DUTY_LEGS = 0x0010
+
+# DUTY_LEGS leg_enable bits: 1 = the leg switches (DUTY's complementary PWM), 0 = floated
+# (both switches off, the phase current free-wheels through the diodes); bits 3-7 reserved
+LEG_A = 0x01
+LEG_B = 0x02
+LEG_C = 0x04
+LEGS_ALL = LEG_A | LEG_B | LEG_C
 
 # GATES bits: 1 = switch on
 GATE_A_HIGH = 0x01
@@ -232,6 +241,18 @@ class Duty(_Message):
 
 @_fast_init
 @dataclass(frozen=True, slots=True, init=False)
+class DutyLegs(_Message):
+    """Controller -> plant: DUTY with a per-leg enable, so a six-step or trapezoidal board can
+    float a leg (both switches off) and still answer with one message."""
+
+    TYPE: ClassVar[MsgType] = MsgType.DUTY_LEGS
+    period: int
+    duty: tuple[int, int, int]   # high-side on-time of each enabled leg, 0..65535 = 0..1
+    leg_enable: int              # LEG_* bits; a leg whose bit is 0 is floated
+
+
+@_fast_init
+@dataclass(frozen=True, slots=True, init=False)
 class Command(_Message):
     """Bench -> controller: enable, speed source, speed, torque and flux references."""
 
@@ -339,8 +360,8 @@ class Shutdown(_Message):
 MESSAGE_CLASSES: dict[MsgType, type] = {
     cls.TYPE: cls
     for cls in (Hello, Sample, Gates, Duty, Command, Telemetry, ParamSet, ParamGet, ParamValue,
-                Status, Fault, Heartbeat, Shutdown)
+                Status, Fault, Heartbeat, Shutdown, DutyLegs)
 }
 
 Message = (Hello | Sample | Gates | Duty | Command | Telemetry | ParamSet | ParamGet | ParamValue
-           | Status | Fault | Heartbeat | Shutdown)
+           | Status | Fault | Heartbeat | Shutdown | DutyLegs)

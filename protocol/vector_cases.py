@@ -22,8 +22,9 @@ from protocol.can_mapping import CanReassembler, can_pack
 from protocol.codec import COUNTER_NAMES, StreamDecoder, encode_frame
 from protocol.can_mapping import COUNTER_NAMES as CAN_COUNTER_NAMES
 from protocol.messages import (
-    CAP_CAN, CAP_GATES, CAP_TELEMETRY, GATE_A_HIGH, GATE_B_LOW, GATE_C_LOW, STATUS_INDEX_PULSE,
-    STATUS_OVERVOLTAGE, Command, ControllerState, Duty, Fault, FaultCode, Gates, Heartbeat, Hello,
+    CAP_CAN, CAP_GATES, CAP_TELEMETRY, GATE_A_HIGH, GATE_B_LOW, GATE_C_LOW, LEG_A, LEG_B, LEGS_ALL,
+    STATUS_INDEX_PULSE,
+    STATUS_OVERVOLTAGE, Command, ControllerState, Duty, DutyLegs, Fault, FaultCode, Gates, Heartbeat, Hello,
     ParamGet, ParamId, ParamSet, ParamStatus, ParamValue, Role, Sample, Shutdown, SpeedSource, Status,
     Telemetry,
 )
@@ -87,6 +88,8 @@ def messages() -> list[tuple[str, object, int, int, int]]:
         ("heartbeat_zero", Heartbeat(0), 20, BENCH, BASE),
         ("heartbeat_max", Heartbeat(0xFFFFFFFF), 21, CONTROLLER, BASE),
         ("shutdown", Shutdown(), 22, BENCH, BASE),
+        ("duty_legs_six_step", DutyLegs(70_000, (40_000, 0, 0), LEG_A | LEG_B), 23, CONTROLLER, BASE),
+        ("duty_legs_all", DutyLegs(0xFFFFFFFF, (1, 2, 3), LEGS_ALL), 24, CONTROLLER, 0x7C0),
     ]
 
 

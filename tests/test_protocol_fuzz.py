@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from protocol.can_mapping import CanReassembler, can_pack
 from protocol.codec import MAX_ENCODED_SEGMENT, FrameEncoder, StreamDecoder, encode_frame
 from protocol.messages import (
-    Command, Duty, Fault, Gates, Heartbeat, Hello, ParamGet, ParamSet, ParamValue, Sample, Shutdown,
+    Command, Duty, DutyLegs, Fault, Gates, Heartbeat, Hello, ParamGet, ParamSet, ParamValue, Sample, Shutdown,
     Status, Telemetry,
 )
 
@@ -37,6 +37,7 @@ MESSAGES = st.one_of(
     st.builds(Fault, u32, u16, f32),
     st.builds(Heartbeat, u32),
     st.just(Shutdown()),
+    st.builds(DutyLegs, u32, st.tuples(u16, u16, u16), st.integers(0, 7)),  # reserved bits 0 (CAN)
 )
 
 
@@ -71,6 +72,8 @@ def test_can_round_trip(msg, role, seq, base):
         expected = replace(msg, period=msg.period & 0xFF)
     elif isinstance(msg, Duty):
         expected = replace(msg, period=msg.period & 0xFFFF)
+    elif isinstance(msg, DutyLegs):  # 13 bits: the leg enables share the word
+        expected = replace(msg, period=msg.period & 0x1FFF)
     assert results[-1] == (expected, role)
 
 

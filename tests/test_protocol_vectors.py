@@ -117,6 +117,9 @@ def test_handbuilt_can_frames(v):
         assert [d[0] for _, d in v.can] == [(v.seq & 0xF) << 4 | k for k in range(len(v.can))]
         assert b"".join(d[1:] for _, d in v.can) == payload
         assert all(len(d) == 8 for _, d in v.can[:-1])
+    elif v.msg.TYPE == MsgType.DUTY_LEGS:  # SPEC 7.2: u16 period low 13 | leg_enable << 13, duties
+        word = (v.msg.period & 0x1FFF) | v.msg.leg_enable << 13
+        assert v.can[0][1] == word.to_bytes(2, "little") + payload[4:10]
     elif v.msg.TYPE not in (MsgType.SAMPLE, MsgType.DUTY):
         assert v.can[0][1] == payload
 

@@ -85,7 +85,7 @@ def test_hello_answered_on_the_third_try():
 
 @pytest.mark.parametrize("knobs, needle", [
     (dict(role=0), "says role 0 (bench) in its HELLO; a controller is role 1"),
-    (dict(capabilities=0x4), "advertises neither GATES nor DUTY (capabilities 0x0004)"),
+    (dict(capabilities=0x4), "advertises none of GATES, DUTY and DUTY_LEGS (capabilities 0x0004)"),
     (dict(control_period_ns=100_000), "was built for a control period of 100000 ns, the bench runs 50000 ns"),
     (dict(clamp={int(ParamId.CONTROL_PERIOD_S): 1e-4}), "control period of 100000 ns"),
 ])

@@ -13,7 +13,7 @@ from __future__ import annotations
 from configfile.dataclass_methods import dataclass
 
 #: HELLO capability bits (SPEC 9.1), bit i = 1 << i.
-CAPABILITY_NAMES = ("GATES", "DUTY", "TELEMETRY", "CAN")
+CAPABILITY_NAMES = ("GATES", "DUTY", "TELEMETRY", "CAN", "DUTY_LEGS")
 
 #: Lowest vendor id: SPEC 8 reserves 60-65535 for a board's own parameters.
 VENDOR_ID_MIN = 60

@@ -34,8 +34,10 @@ _CMD = {"speed_ref_rpm": "rpm", "enable": "1", "speed_source": "1", "torque_mode
         "torque_ref_nm": "Nm", "flux_ref_wb": "Wb"}
 # Step signals (hil/logs/recorder.py step_value): the board's latched fault code from FAULT and
 # STATUS (0 before any), the Modbus bits of the injected faults in effect (hil/faults/injector.py),
-# and the board's state from STATUS (SPEC 9.4) and its ready flag (hil/session/board_state.py).
-_STEP = {"ctrl.fault_code": "1", "fault.active_bits": "1", "board.state": "1", "board.ready": "1"}
+# and the board's state from STATUS (SPEC 9.4) and its ready flag (hil/session/board_state.py),
+# and the leg enables of a DUTY_LEGS board's answers (bit x = leg x switching; 0 before the first).
+_STEP = {"ctrl.fault_code": "1", "fault.active_bits": "1", "board.state": "1", "board.ready": "1",
+         "ctrl.leg_enable": "1"}
 
 #: Every signal a plan may name, with its unit. Angles are wrapped to (-pi, pi].
 SIGNAL_CATALOG: dict[str, str] = {

@@ -25,8 +25,9 @@ from typing import Any, Callable
 from configfile.dataclass_methods import dataclass
 from plant_rt import Plant, TRUTH_FIELDS
 from protocol.messages import (
-    PROTOCOL_VERSION, Command, Fault, FaultCode, Gates, Duty, Hello, ParamGet, ParamId, ParamSet,
-    ParamValue, Role, Sample, Shutdown, SpeedSource, Status, Telemetry,
+    CAP_DUTY, CAP_DUTY_LEGS, CAP_GATES, LEGS_ALL, PROTOCOL_VERSION, Command, Fault, FaultCode, Gates,
+    Duty, DutyLegs, Hello, ParamGet, ParamId, ParamSet, ParamValue, Role, Sample, Shutdown,
+    SpeedSource, Status, Telemetry,
 )
 
 from hil.links.registry import BoardConnection, connect
@@ -41,9 +42,13 @@ from hil.session.realtime import run_realtime
 from hil.session.watchdog import Watchdog, await_answer
 
 RPM_PER_RAD_S = 60.0 / (2.0 * math.pi)
-# ccodec.exchange_periods: the answer kind it may take (a board's kind, once known), and the
-# states it ends in that this loop acts on
+# ccodec.exchange_periods: the answer kind it may take (a board's kind, once known; it hands a
+# DUTY_LEGS back to this loop), and the states it ends in that this loop acts on
 _ANSWER_CODES = {Gates: 0, Duty: 1}
+#: The capability bit (SPEC 9.1) of each answer type.
+_ANSWER_CAPS = {Gates: CAP_GATES, Duty: CAP_DUTY, DutyLegs: CAP_DUTY_LEGS}
+#: The recorder's step signal of the leg enables in force (DUTY_LEGS answers).
+LEG_ENABLE_SIGNAL = "ctrl.leg_enable"
 _LOOP_PENDING, _LOOP_STOPPED, _LOOP_LINK_ERROR = 2, 3, 4
 _TRUTH_INDEX = {name: i for i, name in enumerate(TRUTH_FIELDS)}
 
@@ -146,7 +151,8 @@ class BenchSession:
         self.resent_samples = 0
         self.board_faults = 0
         self.shoot_throughs = 0
-        self._answer_kind: type | None = None    # GATES or DUTY, the first the board answered
+        self._answer_kind: type | None = None    # GATES, DUTY or DUTY_LEGS, the first the board answered
+        self._leg_enable_logged = -1             # the last DUTY_LEGS leg enables recorded
         self._streak_others: set[str] = set()    # non-answer types received while periods miss
         self._streak_stale = 0
         self._last_stale: tuple[str, int] | None = None
@@ -308,8 +314,8 @@ class BenchSession:
             raise SessionError(f"{where} says role {hello.role}{role} in its HELLO; "
                                f"a controller is role {int(Role.CONTROLLER)}")
         caps = hello.capabilities
-        if not caps & 0x3:
-            raise SessionError(f"{where} advertises neither GATES nor DUTY "
+        if not caps & (CAP_GATES | CAP_DUTY | CAP_DUTY_LEGS):
+            raise SessionError(f"{where} advertises none of GATES, DUTY and DUTY_LEGS "
                                f"(capabilities 0x{caps:04x})")
         for name in policy.require_capabilities:
             if not caps & (1 << CAPABILITY_NAMES.index(name)):
@@ -464,7 +470,7 @@ class BenchSession:
             self.board_state.on_status(msg.state, msg.fault_code, msg.period, self.plant.period)
             self._event("board_status", {"state": msg.state, "fault_code": msg.fault_code,
                                          "period": msg.period})
-        elif t is Gates or t is Duty:
+        elif t is Gates or t is Duty or t is DutyLegs:
             self.stale_answers += 1
             self._last_stale = (t.__name__.upper(), msg.period)
         if self.board_hello is None and self.conn is not None:
@@ -550,7 +556,7 @@ class BenchSession:
                 tap.tick(k)
                 if k % publish_every == 0:
                     recorder.frames(k, tap.take_capture())
-            gates = duty = None
+            gates = duty = legs = None
             others = None
             saw_telemetry = False
             msg_out = None
@@ -629,6 +635,14 @@ class BenchSession:
                                 break
                             self.stale_answers += 1
                             self._last_stale = ("DUTY", msg.period)
+                        elif t is DutyLegs:
+                            if msg.period == k:
+                                d = msg.duty
+                                duty = (d[0] / 65535.0, d[1] / 65535.0, d[2] / 65535.0)
+                                legs = msg.leg_enable & LEGS_ALL  # reserved bits ignored (SPEC 4)
+                                break
+                            self.stale_answers += 1
+                            self._last_stale = ("DUTY_LEGS", msg.period)
                         elif t is Telemetry:
                             # every period's companion: straight to the recorder; named among
                             # "others" only if the period goes unanswered
@@ -671,10 +685,12 @@ class BenchSession:
                     plant.step(gates)
                     if self._answer_kind is not Gates:
                         self._note_answer_kind(Gates)
-                else:
+                elif legs is None:
                     plant.step(duty=duty)
                     if self._answer_kind is not Duty:
                         self._note_answer_kind(Duty)
+                else:
+                    self._step_duty_legs(duty, legs)
             if on_period is not None:
                 on_period(k)
             if mailbox is not None and k % publish_every == 0:
@@ -684,12 +700,22 @@ class BenchSession:
                 return done
         return count
 
+    def _step_duty_legs(self, duty: tuple[float, float, float], legs: int) -> None:
+        """A DUTY_LEGS answer: the plant floats the legs whose bit is 0; the leg enables in
+        force are recorded as a step signal when they change."""
+        self.plant.step(duty=duty, legs=legs)
+        if legs != self._leg_enable_logged:
+            self._leg_enable_logged = legs
+            self.recorder.step_value(LEG_ENABLE_SIGNAL, self.plant.period - 1, legs)
+        if self._answer_kind is not DutyLegs:
+            self._note_answer_kind(DutyLegs)
+
     def _note_answer_kind(self, kind: type) -> None:
         """SPEC 2.8.4: a board answering with a type it does not advertise is accepted, logged once."""
         first = self._answer_kind is None
         self._answer_kind = kind
         caps = self.board_hello.capabilities if self.board_hello is not None else 0x3
-        bit = 0x1 if kind is Gates else 0x2
+        bit = _ANSWER_CAPS[kind]
         if first and not caps & bit:
             self._event("answer_type", {"type": kind.__name__.upper(), "capabilities": caps,
                                         "note": "answers with a type it does not advertise"})

@@ -30,7 +30,7 @@ from typing import Callable
 
 import numpy as np
 
-from protocol.messages import Duty, Gates, Sample
+from protocol.messages import LEGS_ALL, Duty, DutyLegs, Gates, Sample
 
 from hil.session.errors import SessionError
 
@@ -84,7 +84,7 @@ def run_realtime(session, count: int, stop: Callable[[], bool] | None = None,
     if answered_period is None:
         answered_period = plant.period - 1
     watchdog = session.watchdog
-    latest_gates = latest_duty = None
+    latest_gates = latest_duty = latest_legs = None
     clock = time.perf_counter_ns
     sleep = time.sleep
     stats["cpu_dma_latency"] = session.cpu_latency.status
@@ -98,7 +98,7 @@ def run_realtime(session, count: int, stop: Callable[[], bool] | None = None,
             msg = link.recv(0.0)
             while msg is not None:
                 t = type(msg)
-                if t is Gates or t is Duty:
+                if t is Gates or t is Duty or t is DutyLegs:
                     if msg.period > answered_period:
                         answered_period = msg.period
                         if t is Gates:
@@ -107,6 +107,8 @@ def run_realtime(session, count: int, stop: Callable[[], bool] | None = None,
                             d = msg.duty
                             latest_gates, latest_duty = None, (d[0] / 65535.0, d[1] / 65535.0,
                                                                d[2] / 65535.0)
+                        # DUTY_LEGS floats the legs whose bit is 0 (reserved bits ignored)
+                        latest_legs = msg.leg_enable & LEGS_ALL if t is DutyLegs else None
                         watchdog.answered()
                     else:
                         late_answers += 1
@@ -146,7 +148,7 @@ def run_realtime(session, count: int, stop: Callable[[], bool] | None = None,
         if latest_duty is None:
             plant.step(latest_gates)
         else:
-            plant.step(duty=latest_duty)
+            plant.step(duty=latest_duty, legs=latest_legs)
         if clock() - tick > period_ns:
             overruns += 1
         if misses > budget:

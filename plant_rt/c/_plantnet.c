@@ -1857,10 +1857,13 @@ static int rise_set(PyObject *rise, int j, int has, double r)
     return PyList_SetItem(rise, j, o); /* steals o */
 }
 
+static int int_in(PyObject *o, long long lo, long long hi, long long *out);
+
 /* SwitchTimeline._duty_windows on arrays: per switch j its on-intervals wins[j][0..nwin[j]-1]
- * for the duties `duty` (no delay in play); the dead-time memory rise (has[j]: not None, r[j]:
- * its value) is read and updated as the Python code does. */
-static void duty_windows_c(double T, double td, const double duty[3], int has[6], double r[6],
+ * for the duties `duty` with the leg enables `legs` (no delay in play); the dead-time memory
+ * rise (has[j]: not None, r[j]: its value) is read and updated as the Python code does. A
+ * floated leg has no window and forgets its rises. */
+static void duty_windows_c(double T, double td, const double duty[3], long legs, int has[6], double r[6],
                            double wins[6][MAX_WIN][2], int nwin[6])
 {
     for (int x = 0; x < 3; x++) {
@@ -1869,6 +1872,13 @@ static void duty_windows_c(double T, double td, const double duty[3], int has[6]
         double a;
         nwin[jh] = 0;
         nwin[jl] = 0;
+        if (!(legs >> x & 1)) {
+            has[jh] = 0;
+            r[jh] = 0.0;
+            has[jl] = 0;
+            r[jl] = 0.0;
+            continue;
+        }
         if (d >= 1.0 || d <= 0.0) {
             int jon = d >= 1.0 ? jh : jl, joff = d >= 1.0 ? jl : jh;
             double rr = r[jon];
@@ -1963,21 +1973,27 @@ static int rise_store(PyObject *rise, const int has[6], const double r[6])
 }
 
 PyDoc_STRVAR(duty_windows_doc,
-"duty_windows(T, dead_time, duty, rise) -> [[(on, off), ...] x 6]\n\n"
+"duty_windows(T, dead_time, duty, rise[, legs]) -> [[(on, off), ...] x 6]\n\n"
 "SwitchTimeline._duty_windows: per switch its on-intervals in [0, T) for a duty command with\n"
 "no delay in play, turn-on edges delayed by the dead time; updates the list rise (6 items,\n"
-"None or the time of the command's last rising edge) in place.");
+"None or the time of the command's last rising edge) in place. legs: the leg enables (bit x\n"
+"= leg x, default 7); a floated leg has no window.");
 
 static PyObject *mod_duty_windows(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     (void)self;
-    if (nargs != 4) {
-        PyErr_SetString(PyExc_TypeError, "duty_windows takes 4 arguments");
+    if (nargs != 4 && nargs != 5) {
+        PyErr_SetString(PyExc_TypeError, "duty_windows takes 4 or 5 arguments");
         return NULL;
     }
     double T, td, duty[3];
     if (get_double(args[0], &T) < 0 || get_double(args[1], &td) < 0 ||
         get_doubles(args[2], duty, 3, "duty") < 0) {
+        return NULL;
+    }
+    long long legs = 7;
+    if (nargs == 5 && !int_in(args[4], 0, 7, &legs)) {
+        PyErr_SetString(PyExc_ValueError, "duty_windows: legs must be an int 0..7");
         return NULL;
     }
     PyObject *rise = args[3];
@@ -1992,7 +2008,7 @@ static PyObject *mod_duty_windows(PyObject *self, PyObject *const *args, Py_ssiz
             return NULL;
         }
     }
-    duty_windows_c(T, td, duty, has, r, wins, nwin);
+    duty_windows_c(T, td, duty, (long)legs, has, r, wins, nwin);
     PyObject *out = windows_list(wins, nwin);
     if (out == NULL || rise_store(rise, has, r) < 0) {
         Py_XDECREF(out);
@@ -2460,13 +2476,17 @@ python:
  * Every operation is the Python code's (and the kernel's duty_windows and leg_period), in the
  * same order. */
 
-/* Command.edges(j, T) of a command given as its gate word (duty NULL) or its duties: the
- * switch's state at 0+ in *state0, the number of toggle times (0 or 2) put in e. */
-static int cmd_edges(long gates, const double *duty, int j, double T, int *state0, double e[2])
+/* Command.edges(j, T) of a command given as its gate word (duty NULL) or its duties and leg
+ * enables: the switch's state at 0+ in *state0, the number of toggle times (0 or 2) put in e. */
+static int cmd_edges(long gates, const double *duty, long legs, int j, double T, int *state0, double e[2])
 {
     int leg = j / 2, low = j % 2;
     if (duty == NULL) {
         *state0 = (gates & LEG_BITS[leg][low]) != 0;
+        return 0;
+    }
+    if (!(legs >> leg & 1)) {
+        *state0 = 0; /* a floated leg: both switches off all period */
         return 0;
     }
     double d = duty[leg];
@@ -2488,15 +2508,15 @@ static int cmd_edges(long gates, const double *duty, int j, double T, int *state
  * the old command and the new duty command). At most 5 toggles per switch, so at most 3
  * windows. */
 static void switch_windows_c(double T, double delay_s, double td, long old_gates,
-                             const double *old_duty, const double duty[3], int has[6],
-                             double r[6], double wins[6][MAX_WIN][2], int nwin[6])
+                             const double *old_duty, long old_legs, const double duty[3], long legs,
+                             int has[6], double r[6], double wins[6][MAX_WIN][2], int nwin[6])
 {
     double delay = T < delay_s ? T : delay_s;
     for (int j = 0; j < 6; j++) {
         double oe[2], ne[2], tog[8];
         int s0, ns0, nt = 0, start;
-        int no = cmd_edges(old_gates, old_duty, j, T, &s0, oe);
-        int nn = cmd_edges(0, duty, j, T, &ns0, ne);
+        int no = cmd_edges(old_gates, old_duty, old_legs, j, T, &s0, oe);
+        int nn = cmd_edges(0, duty, legs, j, T, &ns0, ne);
         if (delay > 0.0) {
             start = s0;
             for (int i = 0; i < no; i++) {
@@ -2596,21 +2616,25 @@ static int exact_floats(PyObject *tup, double *out, Py_ssize_t n)
     return 1;
 }
 
-/* The duties of a new command: a Command (of the class bound in L_COMMAND) as it is, or a
- * tuple or list of three exact floats in [0, 1] (Command.parse's check). 1 with duty set and
- * *tup the tuple to keep (a new reference), 0 when Python must parse it (no error set), -1 on
- * an error. */
-enum { CM_GATES, CM_DUTY };
-static layout_t L_COMMAND = {NULL, 0, {"gates", "duty", NULL, NULL, NULL, NULL, NULL, NULL}, {0}};
+/* The duties and leg enables of a new command: a Command (of the class bound in L_COMMAND) as
+ * it is, or a tuple or list of three exact floats in [0, 1] (Command.parse's check; all three
+ * legs enabled). 1 with duty and *legs set and *tup the tuple to keep (a new reference), 0 when
+ * Python must parse it (no error set), -1 on an error. */
+enum { CM_GATES, CM_DUTY, CM_LEGS };
+static layout_t L_COMMAND = {NULL, 0, {"gates", "duty", "legs", NULL, NULL, NULL, NULL, NULL}, {0}};
 
-static int new_duties(PyObject *arg, PyObject **tup, double duty[3])
+static int new_duties(PyObject *arg, PyObject **tup, double duty[3], long *legs)
 {
     PyObject *seq = arg;
+    *legs = 7;
     if (Py_TYPE(arg) == L_COMMAND.type) {
         seq = slot(&L_COMMAND, arg, CM_DUTY);
-        if (seq == NULL || !PyTuple_CheckExact(seq)) {
+        long long mask;
+        PyObject *lg = slot(&L_COMMAND, arg, CM_LEGS);
+        if (seq == NULL || !PyTuple_CheckExact(seq) || lg == NULL || !int_in(lg, 0, 7, &mask)) {
             return 0;
         }
+        *legs = (long)mask;
     } else if (!PyTuple_CheckExact(seq) && !PyList_CheckExact(seq)) {
         return 0;
     }
@@ -2632,8 +2656,8 @@ static int new_duties(PyObject *arg, PyObject **tup, double duty[3])
     return *tup == NULL ? -1 : 1;
 }
 
-/* A Command(duty=tup) of the bound class (its __init__ only sets the two slots), or `given`
- * when the new command was one already. New reference. */
+/* A Command(duty=tup) of the bound class, all legs enabled (its __init__ only sets the three
+ * slots), or `given` when the new command was one already. New reference. */
 static PyObject *duty_command(PyObject *given, PyObject *tup)
 {
     if (Py_TYPE(given) == L_COMMAND.type) {
@@ -2647,10 +2671,17 @@ static PyObject *duty_command(PyObject *given, PyObject *tup)
     }
     PyObject **gates = (PyObject **)((char *)cmd + L_COMMAND.off[CM_GATES]);
     PyObject **duty = (PyObject **)((char *)cmd + L_COMMAND.off[CM_DUTY]);
+    PyObject **legs = (PyObject **)((char *)cmd + L_COMMAND.off[CM_LEGS]);
+    PyObject *all_legs = PyLong_FromLong(7);
+    if (all_legs == NULL) {
+        Py_DECREF(cmd);
+        return NULL;
+    }
     Py_INCREF(Py_None);
     *gates = Py_None;
     Py_INCREF(tup);
     *duty = tup;
+    *legs = all_legs;
     return cmd;
 }
 
@@ -2658,12 +2689,13 @@ static PyObject *duty_command(PyObject *given, PyObject *tup)
 
 PyDoc_STRVAR(duty_period_doc,
 "duty_period(cfg, command_type, old_gates, old_duty, new, rise, vdc, pa, pb, w, th, revs,\n"
-"            period, load_seg, bw)\n"
+"            period, load_seg, bw, old_legs)\n"
 "    -> None | (command, windows)\n"
 "       | (command, pa, pb, w, th, (u_alpha_int, u_beta_int), idc_int, flags, revs, period, h)\n\n"
 "Plant.step's period for a duty command on the leg-window path in one call: Command.parse\n"
-"(new: the duties, or the Command held), SwitchTimeline.switch_windows (old command: gate word\n"
-"old_gates, or duties old_duty) with the dead-time memory rise (updated in place),\n"
+"(new: the duties, or a duty Command with its leg enables), SwitchTimeline.switch_windows (old\n"
+"command: gate word old_gates, or duties old_duty with leg enables old_legs) with the dead-time\n"
+"memory rise (updated in place),\n"
 "Plant._leg_period (the kernel's leg_period) and Plant._finish (index pulse, angle wrap,\n"
 "revolutions, period count). cfg: motor constants (MotorModel._k, 8), ld, spm (0 or 1), T,\n"
 "computation delay, dead time, device drop, knee, h_max, the index pulse's status bit.\n"
@@ -2677,8 +2709,8 @@ PyDoc_STRVAR(duty_period_doc,
 static PyObject *mod_duty_period(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     (void)self;
-    if (nargs != 15) {
-        PyErr_SetString(PyExc_TypeError, "duty_period takes 15 arguments");
+    if (nargs != 16) {
+        PyErr_SetString(PyExc_TypeError, "duty_period takes 16 arguments");
         return NULL;
     }
     double c[NDUTY_CFG], duty[3], old_duty[3], seg[4], vdc, st[4], bw;
@@ -2700,9 +2732,9 @@ static PyObject *mod_duty_period(PyObject *self, PyObject *const *args, Py_ssize
         !PyList_CheckExact(rise) || PyList_GET_SIZE(rise) != 6) {
         Py_RETURN_NONE;
     }
-    long long revs, period;
+    long long revs, period, old_legs;
     if (!int_in(args[11], -(long long)EXACT_INT_LIMIT, (long long)EXACT_INT_LIMIT, &revs) ||
-        !int_in(args[12], 0, (long long)EXACT_INT_LIMIT, &period)) {
+        !int_in(args[12], 0, (long long)EXACT_INT_LIMIT, &period) || !int_in(args[15], 0, 7, &old_legs)) {
         Py_RETURN_NONE;
     }
     if (args[3] != Py_None) {
@@ -2755,18 +2787,19 @@ static PyObject *mod_duty_period(PyObject *self, PyObject *const *args, Py_ssize
         Py_RETURN_NONE;
     }
     PyObject *tup = NULL;
-    int parsed = new_duties(args[4], &tup, duty);
+    long legs;
+    int parsed = new_duties(args[4], &tup, duty, &legs);
     if (parsed <= 0) {
         return parsed < 0 ? NULL : Py_NewRef(Py_None);
     }
     /* SwitchTimeline.switch_windows (Command.__eq__ of the old and the new duty command) */
-    int same = od != NULL && od[0] == duty[0] && od[1] == duty[1] && od[2] == duty[2];
+    int same = od != NULL && od[0] == duty[0] && od[1] == duty[1] && od[2] == duty[2] && old_legs == legs;
     double wins[6][MAX_WIN][2];
     int nwin[6];
     if (delay_s == 0.0 || same) {
-        duty_windows_c(T, td, duty, has, r, wins, nwin);
+        duty_windows_c(T, td, duty, legs, has, r, wins, nwin);
     } else {
-        switch_windows_c(T, delay_s, td, old_gates, od, duty, has, r, wins, nwin);
+        switch_windows_c(T, delay_s, td, old_gates, od, (long)old_legs, duty, legs, has, r, wins, nwin);
     }
     double th0 = st[3], out[3];
     int h_end = 0;
@@ -2895,7 +2928,7 @@ PyMODINIT_FUNC PyInit__plantnet(void)
         return NULL;
     }
     /* The kernel's interface version: plant_rt/ckernel.py refuses a build of another one. */
-    if (PyModule_AddIntConstant(mod, "ABI", 5) < 0) {
+    if (PyModule_AddIntConstant(mod, "ABI", 6) < 0) {
         Py_DECREF(mod);
         return NULL;
     }

@@ -231,18 +231,20 @@ static float get_f32(const uint8_t *p)
 #define FAULT_SIZE 10u
 #define HEARTBEAT_SIZE 4u
 #define SHUTDOWN_SIZE 0u
+#define DUTY_LEGS_SIZE 11u
 #define TELEMETRY_FLOATS 12u
 
 static int type_known(uint8_t type)
 {
-    return type >= (uint8_t)HIL_MSG_HELLO && type <= (uint8_t)HIL_MSG_SHUTDOWN;
+    return (type >= (uint8_t)HIL_MSG_HELLO && type <= (uint8_t)HIL_MSG_SHUTDOWN) ||
+           type == (uint8_t)HIL_MSG_DUTY_LEGS;
 }
 
 /* Fixed payload size per type; HELLO's is its fixed part. */
-static const uint8_t payload_size[HIL_MSG_SHUTDOWN + 1] = {
+static const uint8_t payload_size[HIL_MSG_TYPE_MAX + 1u] = {
     0u, HELLO_FIXED_SIZE, SAMPLE_SIZE, GATES_SIZE, DUTY_SIZE, COMMAND_SIZE, TELEMETRY_SIZE,
     PARAM_SET_SIZE, PARAM_GET_SIZE, PARAM_VALUE_SIZE, STATUS_SIZE, FAULT_SIZE, HEARTBEAT_SIZE,
-    SHUTDOWN_SIZE};
+    SHUTDOWN_SIZE, 0u /* 0x0E undefined */, DUTY_LEGS_SIZE};
 
 /* Three 12-bit ADC counts and 4 status bits as one 40-bit little-endian field. */
 static int adc40_check(const hil_sample *s)
@@ -314,6 +316,13 @@ static void payload_write(const hil_msg *msg, uint8_t *p)
         for (size_t i = 0; i < 3u; i++) {
             put_u16(p + 4 + 2 * i, msg->u.duty.duty[i]);
         }
+        break;
+    case HIL_MSG_DUTY_LEGS:
+        put_u32(p, msg->u.duty_legs.period);
+        for (size_t i = 0; i < 3u; i++) {
+            put_u16(p + 4 + 2 * i, msg->u.duty_legs.duty[i]);
+        }
+        p[10] = msg->u.duty_legs.leg_enable;
         break;
     case HIL_MSG_COMMAND:
         p[0] = msg->u.command.flags;
@@ -421,6 +430,13 @@ int hil_payload_decode(uint8_t type, const uint8_t *p, size_t len, hil_msg *msg)
         for (size_t i = 0; i < 3u; i++) {
             msg->u.duty.duty[i] = get_u16(p + 4 + 2 * i);
         }
+        break;
+    case HIL_MSG_DUTY_LEGS:
+        msg->u.duty_legs.period = get_u32(p);
+        for (size_t i = 0; i < 3u; i++) {
+            msg->u.duty_legs.duty[i] = get_u16(p + 4 + 2 * i);
+        }
+        msg->u.duty_legs.leg_enable = p[10]; /* reserved bits kept as received; users ignore them */
         break;
     case HIL_MSG_COMMAND:
         msg->u.command.flags = p[0];
@@ -691,6 +707,8 @@ size_t hil_decoder_feed_buf(hil_decoder *d, const uint8_t *data, size_t len, hil
 #define CAN_ID_MAX 0x7FFu
 #define CAN_ROLE_STRIDE 0x20u
 #define CAN_SEGMENT_DATA 7u
+#define CAN_DUTY_LEGS_PERIOD_BITS 13u
+#define CAN_DUTY_LEGS_PERIOD_MASK ((1u << CAN_DUTY_LEGS_PERIOD_BITS) - 1u)
 
 /* Types whose payload does not fit one classic frame: sent with a segmentation header. */
 static int can_segmented(uint8_t type)
@@ -732,6 +750,23 @@ int hil_can_pack(const hil_msg *msg, uint8_t sender_role, uint16_t base_id, hil_
         put_u16(frames[0].data, (uint16_t)msg->u.duty.period); /* low 16 bits */
         for (size_t i = 0; i < 3u; i++) {
             put_u16(frames[0].data + 2 + 2 * i, msg->u.duty.duty[i]);
+        }
+        return 1;
+    }
+    if (msg->type == (uint8_t)HIL_MSG_DUTY_LEGS) {
+        /* one u16: period low 13 bits, leg enables in bits 13-15; a reserved leg bit has no room */
+        if ((msg->u.duty_legs.leg_enable & ~HIL_LEGS_ALL) != 0u) {
+            return HIL_ERR_RANGE;
+        }
+        if (max_frames < 1u) {
+            return HIL_ERR_BUFFER;
+        }
+        frames[0].id = id;
+        frames[0].dlc = 8;
+        put_u16(frames[0].data, (uint16_t)((msg->u.duty_legs.period & CAN_DUTY_LEGS_PERIOD_MASK) |
+                                           ((uint32_t)msg->u.duty_legs.leg_enable << CAN_DUTY_LEGS_PERIOD_BITS)));
+        for (size_t i = 0; i < 3u; i++) {
+            put_u16(frames[0].data + 2 + 2 * i, msg->u.duty_legs.duty[i]);
         }
         return 1;
     }
@@ -827,6 +862,18 @@ static int can_single(hil_can_rx *rx, uint8_t type, const hil_can_frame *f, hil_
             for (size_t i = 0; i < 3u; i++) {
                 out->u.duty.duty[i] = get_u16(f->data + 2 + 2 * i);
             }
+        }
+        out->type = type;
+    } else if (type == (uint8_t)HIL_MSG_DUTY_LEGS) {
+        if (f->dlc != 8u) {
+            rx->length_errors++;
+            return 0;
+        }
+        uint16_t word = get_u16(f->data);
+        out->u.duty_legs.period = can_extend_period(rx, word & CAN_DUTY_LEGS_PERIOD_MASK, CAN_DUTY_LEGS_PERIOD_BITS);
+        out->u.duty_legs.leg_enable = (uint8_t)(word >> CAN_DUTY_LEGS_PERIOD_BITS);
+        for (size_t i = 0; i < 3u; i++) {
+            out->u.duty_legs.duty[i] = get_u16(f->data + 2 + 2 * i);
         }
         out->type = type;
     } else {

@@ -42,8 +42,11 @@ typedef enum {
     HIL_MSG_STATUS = 0x0A,      /* controller -> bench */
     HIL_MSG_FAULT = 0x0B,       /* controller -> bench */
     HIL_MSG_HEARTBEAT = 0x0C,   /* both ways */
-    HIL_MSG_SHUTDOWN = 0x0D     /* bench -> controller: stop switching and exit */
+    HIL_MSG_SHUTDOWN = 0x0D,    /* bench -> controller: stop switching and exit */
+    /* 0x0E is not defined (the vector files use it as the unknown type) */
+    HIL_MSG_DUTY_LEGS = 0x0F    /* controller -> plant, DUTY with a per-leg enable */
 } hil_msg_type;
+#define HIL_MSG_TYPE_MAX 0x0Fu /* the highest type code defined in this version */
 
 typedef enum { HIL_ROLE_BENCH = 0, HIL_ROLE_CONTROLLER = 1 } hil_role;
 
@@ -52,6 +55,14 @@ typedef enum { HIL_ROLE_BENCH = 0, HIL_ROLE_CONTROLLER = 1 } hil_role;
 #define HIL_CAP_DUTY 0x0002u      /* answers SAMPLE with DUTY */
 #define HIL_CAP_TELEMETRY 0x0004u /* sends TELEMETRY */
 #define HIL_CAP_CAN 0x0008u       /* reachable over the CAN mapping */
+#define HIL_CAP_DUTY_LEGS 0x0010u /* answers SAMPLE with DUTY_LEGS */
+
+/* DUTY_LEGS leg_enable bits: 1 = the leg switches (complementary PWM as in DUTY), 0 = floated
+ * (both switches off: the phase current free-wheels through the diodes); bits 3-7 reserved (0) */
+#define HIL_LEG_A 0x01u
+#define HIL_LEG_B 0x02u
+#define HIL_LEG_C 0x04u
+#define HIL_LEGS_ALL 0x07u
 
 /* GATES bits: 1 = switch on */
 #define HIL_GATE_A_HIGH 0x01u
@@ -160,6 +171,12 @@ typedef struct {
 } hil_duty;
 
 typedef struct {
+    uint32_t period;
+    uint16_t duty[3];   /* as hil_duty, for the enabled legs */
+    uint8_t leg_enable; /* HIL_LEG_*: a leg whose bit is 0 is floated */
+} hil_duty_legs;
+
+typedef struct {
     uint8_t flags;        /* HIL_CMD_* */
     uint8_t speed_source; /* hil_speed_source */
     float speed_ref_rad_s; /* mechanical */
@@ -234,6 +251,7 @@ typedef struct {
         hil_status status;
         hil_fault fault;
         hil_heartbeat heartbeat;
+        hil_duty_legs duty_legs;
     } u;
 } hil_msg;
 
@@ -242,7 +260,8 @@ typedef enum {
     HIL_ERR_LENGTH = -1,       /* payload length wrong for the type */
     HIL_ERR_UNKNOWN_TYPE = -2, /* type code not in this version */
     HIL_ERR_VERSION = -3,      /* frame from another protocol version */
-    HIL_ERR_RANGE = -4,        /* field out of range (name_len > 40, SAMPLE count > 4095, bad CAN role/base) */
+    HIL_ERR_RANGE = -4,        /* field out of range (name_len > 40, SAMPLE count > 4095, bad CAN role/base,
+                                * DUTY_LEGS reserved leg bits on CAN) */
     HIL_ERR_BUFFER = -5        /* caller's buffer too small */
 } hil_result;
 
@@ -291,7 +310,7 @@ int hil_decoder_feed(hil_decoder *dec, uint8_t byte, hil_msg *out);
 size_t hil_decoder_feed_buf(hil_decoder *dec, const uint8_t *data, size_t len, hil_msg *out, int *got);
 
 /* CAN mapping (classic CAN, 11-bit identifiers):
- * id = base_id + 0x20 * sender_role + type. SAMPLE, GATES and DUTY fit one
+ * id = base_id + 0x20 * sender_role + type. SAMPLE, GATES, DUTY and DUTY_LEGS fit one
  * 8-byte frame; longer messages are split over numbered frames (SPEC.md). */
 #define HIL_CAN_DEFAULT_BASE_ID 0x100u
 #define HIL_CAN_MAX_FRAMES 16u

@@ -5,7 +5,7 @@
  * above 8 must be refused, never read), then min(dlc, 8) data bytes. Ids are
  * folded near the protocol's range so most frames are ours. Every message
  * that comes out must pack again and reassemble, in a fresh receiver, into
- * the same payload (the period of SAMPLE/DUTY compared in its transmitted bits).
+ * the same payload (the period of SAMPLE/DUTY/DUTY_LEGS compared in its transmitted bits).
  */
 #include <stddef.h>
 #include <stdint.h>
@@ -25,6 +25,9 @@ static void same_message(const hil_msg *a, const hil_msg *b)
     } else if (x.type == HIL_MSG_DUTY) {
         x.u.duty.period &= 0xFFFFu;
         y.u.duty.period &= 0xFFFFu;
+    } else if (x.type == HIL_MSG_DUTY_LEGS) {
+        x.u.duty_legs.period &= 0x1FFFu; /* 13 bits: the leg enables share the word */
+        y.u.duty_legs.period &= 0x1FFFu;
     }
     int na = hil_payload_encode(&x, pa, sizeof pa);
     int nb = hil_payload_encode(&y, pb, sizeof pb);

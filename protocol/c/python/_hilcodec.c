@@ -32,7 +32,7 @@
 
 #include "../hil_proto.h"
 
-#define NTYPES (HIL_MSG_SHUTDOWN + 1)
+#define NTYPES ((int)HIL_MSG_TYPE_MAX + 1)
 #define MAX_FIELDS 17
 
 /* One message class of protocol/messages.py: its type object and the offsets of its slots. */
@@ -63,7 +63,14 @@ static const char *const field_names[NTYPES][MAX_FIELDS + 1] = {
     [HIL_MSG_FAULT] = {"period", "code", "value", NULL},
     [HIL_MSG_HEARTBEAT] = {"counter", NULL},
     [HIL_MSG_SHUTDOWN] = {NULL},
+    [HIL_MSG_DUTY_LEGS] = {"period", "duty", "leg_enable", NULL},
 };
+
+/* The type codes this version defines (0x0E is not one: it has no class). */
+static int type_defined(int type)
+{
+    return (type >= HIL_MSG_HELLO && type <= HIL_MSG_SHUTDOWN) || type == HIL_MSG_DUTY_LEGS;
+}
 
 #define SLOT(obj, off) (*(PyObject **)((char *)(obj) + (off)))
 
@@ -113,6 +120,9 @@ static PyObject *mod_setup(PyObject *self, PyObject *args)
         return NULL;
     }
     for (int t = HIL_MSG_HELLO; t < NTYPES; t++) {
+        if (!type_defined(t)) {
+            continue;
+        }
         PyObject *key = PyLong_FromLong(t);
         if (key == NULL) {
             return NULL;
@@ -185,6 +195,12 @@ static PyObject *message_object(const hil_msg *m)
         const uint16_t *d = m->u.duty.duty;
         rc = PUT_U(0, m->u.duty.period) |
              put(obj, t, 1, Py_BuildValue("(HHH)", d[0], d[1], d[2]));
+        break;
+    }
+    case HIL_MSG_DUTY_LEGS: {
+        const uint16_t *d = m->u.duty_legs.duty;
+        rc = PUT_U(0, m->u.duty_legs.period) |
+             put(obj, t, 1, Py_BuildValue("(HHH)", d[0], d[1], d[2])) | PUT_U(2, m->u.duty_legs.leg_enable);
         break;
     }
     case HIL_MSG_TELEMETRY: {
@@ -306,6 +322,24 @@ static int get_f32(PyObject *obj, Py_ssize_t off, float *out)
         }                                                                                                  \
     } while (0)
 
+/* The three u16 duties of a DUTY or DUTY_LEGS, or -1 when d is not a tuple of three of them. */
+static int get_duties(PyObject *d, uint16_t duty[3])
+{
+    if (d == NULL || !PyTuple_CheckExact(d) || PyTuple_GET_SIZE(d) != 3) {
+        return -1;
+    }
+    for (Py_ssize_t i = 0; i < 3; i++) {
+        PyObject *v = PyTuple_GET_ITEM(d, i);
+        int overflow;
+        long long x = PyLong_Check(v) ? PyLong_AsLongLongAndOverflow(v, &overflow) : -1;
+        if (!PyLong_Check(v) || overflow || x < 0 || x > 0xFFFF) {
+            return -1;
+        }
+        duty[i] = (uint16_t)x;
+    }
+    return 0;
+}
+
 /* The hil_msg of obj (an instance of exactly one of the message classes), or -1. */
 static int message_struct(PyObject *obj, hil_msg *m)
 {
@@ -338,23 +372,19 @@ static int message_struct(PyObject *obj, hil_msg *m)
         GET_U(0, U32, m->u.gates.period);
         GET_AS(uint8_t, 1, U8, m->u.gates.gates);
         break;
-    case HIL_MSG_DUTY: {
+    case HIL_MSG_DUTY:
         GET_U(0, U32, m->u.duty.period);
-        PyObject *d = SLOT(obj, off[1]);
-        if (d == NULL || !PyTuple_CheckExact(d) || PyTuple_GET_SIZE(d) != 3) {
+        if (get_duties(SLOT(obj, off[1]), m->u.duty.duty) < 0) {
             return -1;
         }
-        for (Py_ssize_t i = 0; i < 3; i++) {
-            PyObject *v = PyTuple_GET_ITEM(d, i);
-            int overflow;
-            long long x = PyLong_Check(v) ? PyLong_AsLongLongAndOverflow(v, &overflow) : -1;
-            if (!PyLong_Check(v) || overflow || x < 0 || x > 0xFFFF) {
-                return -1;
-            }
-            m->u.duty.duty[i] = (uint16_t)x;
-        }
         break;
-    }
+    case HIL_MSG_DUTY_LEGS:
+        GET_U(0, U32, m->u.duty_legs.period);
+        if (get_duties(SLOT(obj, off[1]), m->u.duty_legs.duty) < 0) {
+            return -1;
+        }
+        GET_AS(uint8_t, 2, U8, m->u.duty_legs.leg_enable);
+        break;
     case HIL_MSG_TELEMETRY: {
         hil_telemetry *s = &m->u.telemetry;
         float *const f[12] = {&s->speed_feedback_rad_s, &s->speed_encoder_rad_s, &s->speed_raw_rad_s,

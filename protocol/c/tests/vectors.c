@@ -71,12 +71,16 @@ static const field_desc FIELDS[] = {
     FD(HIL_MSG_FAULT, "code", F_U16, u.fault.code),
     FD(HIL_MSG_FAULT, "value", F_F32, u.fault.value),
     FD(HIL_MSG_HEARTBEAT, "counter", F_U32, u.heartbeat.counter),
+    FD(HIL_MSG_DUTY_LEGS, "period", F_U32, u.duty_legs.period),
+    FD(HIL_MSG_DUTY_LEGS, "duty", F_DUTY, u.duty_legs.duty),
+    FD(HIL_MSG_DUTY_LEGS, "leg_enable", F_U8, u.duty_legs.leg_enable),
 };
 
 static const char *const TYPE_NAMES[] = {"",          "HELLO",     "SAMPLE",      "GATES",
                                          "DUTY",      "COMMAND",   "TELEMETRY",   "PARAM_SET",
                                          "PARAM_GET", "PARAM_VALUE", "STATUS",    "FAULT",
-                                         "HEARTBEAT", "SHUTDOWN"};
+                                         "HEARTBEAT", "SHUTDOWN",  "" /* 0x0E undefined */,
+                                         "DUTY_LEGS"};
 
 typedef struct {
     const char *path;
