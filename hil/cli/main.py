@@ -89,6 +89,9 @@ def _parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
         run.add_argument("--no-progress", action="store_true", help="no progress bar")
         run.add_argument("--live", metavar="[HOST:]PORT", nargs="?", const="127.0.0.1:8765",
                          help="Foxglove WebSocket server while the plans run (default 127.0.0.1:8765)")
+        run.add_argument("--live-origin", metavar="ORIGIN", action="append", default=None,
+                         help="a web origin allowed to open the live view besides Foxglove's app "
+                              "(repeatable; docs/live.md)")
 
     if only in (None, "serve"):
         serve = sub.add_parser("serve", help="run the plant alone for an external board",
@@ -111,6 +114,9 @@ def _parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
                            help="enable the board at start (otherwise: Modbus run bit)")
         serve.add_argument("--live", metavar="[HOST:]PORT", nargs="?", const="127.0.0.1:8765",
                            help="Foxglove WebSocket server for live viewing (default 127.0.0.1:8765)")
+        serve.add_argument("--live-origin", metavar="ORIGIN", action="append", default=None,
+                           help="a web origin allowed to open the live view besides Foxglove's app "
+                                "(repeatable; docs/live.md)")
         serve.add_argument("--live-rate-hz", type=float, default=1000.0,
                            help="rows per second of simulated time sent to viewers (default 1000)")
         serve.add_argument("--pace", choices=("fast", "realtime"), default="fast",
