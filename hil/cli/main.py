@@ -165,6 +165,9 @@ def _parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
         sweep.add_argument("--resume", action="store_true",
                            help="continue an interrupted sweep in --out without repeating finished runs")
         sweep.add_argument("--no-progress", action="store_true", help="no progress bar")
+        sweep.add_argument("--allow-programs", action="store_true",
+                           help="run a sweep whose link (exec:, lib:, qemu:) runs a program it names "
+                                "(only for sweep files you trust)")
 
     if only in (None, "init"):
         init = sub.add_parser("init", help="scaffold a bench project for your motor and firmware",
