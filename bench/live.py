@@ -33,8 +33,8 @@ _VIEWER = """
 import asyncio, json, sys
 import websockets
 
-async def run(port):
-    async with websockets.connect(f"ws://127.0.0.1:{port}", subprotocols=["foxglove.sdk.v1"],
+async def run(url):
+    async with websockets.connect(url, subprotocols=["foxglove.sdk.v1"],
                                   max_queue=1) as ws:
         channels = []
         while len(channels) < 3:
@@ -51,14 +51,14 @@ async def run(port):
         # full, the kernel's buffers fill, and the server's backlog for this client overflows.
         await asyncio.sleep(3600)
 
-asyncio.run(run(int(sys.argv[1])))
+asyncio.run(run(sys.argv[1]))
 """
 
 
-def _stalled_viewer(port: int, timeout_s: float = 10.0, reads: bool = False) -> subprocess.Popen:
+def _stalled_viewer(url: str, timeout_s: float = 10.0, reads: bool = False) -> subprocess.Popen:
     """A viewer process that subscribes to every channel and then stops reading (until killed),
     or with `reads` keeps reading and dropping what it gets."""
-    proc = subprocess.Popen([sys.executable, "-c", _VIEWER, str(port), "read" if reads else "stall"],
+    proc = subprocess.Popen([sys.executable, "-c", _VIEWER, url, "read" if reads else "stall"],
                             stdout=subprocess.PIPE, text=True)
     line: list[str] = []
     reader = threading.Thread(target=lambda: line.append(proc.stdout.readline()), daemon=True)
@@ -113,7 +113,7 @@ def run(quick: bool = False) -> dict:
                     streams.append(stream)
                     s.recorder.live = stream
                     if name == "stalled viewer":
-                        viewers.append(_stalled_viewer(stream.port))
+                        viewers.append(_stalled_viewer(stream.url))
                         # Stall it for real: a row every period for 20,000 periods (about 5 MB)
                         # fills the kernel's buffers between server and viewer (4 MB send,
                         # 128 kB receive here: `ss -tn` shows both full after it), so from the
@@ -161,7 +161,7 @@ def reading_viewer(periods: int, batches: int) -> dict:
                 streams.append(stream)
                 s.recorder.live = stream
                 if name == "viewer reading":
-                    viewer = _stalled_viewer(stream.port, reads=True)
+                    viewer = _stalled_viewer(stream.url, reads=True)
                 s.run_periods(periods // 4)
                 sessions[name] = s
             for _ in range(batches):

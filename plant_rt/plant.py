@@ -961,6 +961,18 @@ class Plant:
         self._rebuild()
         self._timeline.reset(self._cmd)
 
+    def non_finite_state(self) -> tuple[str, float] | None:
+        """(name, value) of the first integrator state that is not finite, or None: one
+        expression while all are (x - x is 0.0 for a finite x, NaN for an infinity or NaN)."""
+        pa, pb, w, th, vcap, vdc = self._pa, self._pb, self._w, self._th, self._vcap, self._vdc
+        if (pa - pa) + (pb - pb) + (w - w) + (th - th) + (vcap - vcap) + (vdc - vdc) == 0.0:
+            return None
+        for name, value in (("speed_rad_s", w), ("theta_m_rad", th), ("psi_alpha", pa),
+                            ("psi_beta", pb), ("v_cap", vcap), ("v_dc", vdc)):
+            if not math.isfinite(value):
+                return name, value
+        return None
+
     @property
     def state(self) -> dict[str, float]:
         """Integrator state (for diagnostics and reference comparisons)."""

@@ -8,6 +8,7 @@ from __future__ import annotations
 import asyncio
 import base64
 import json
+import os
 import socket
 import struct
 import subprocess
@@ -85,17 +86,19 @@ class Viewer:
 
 def test_a_viewer_sees_the_speed_follow_the_reference_and_changes_it(tmp_path):
     port = free_port()
+    token = "test-token-of-this-run"           # HIL_LIVE_TOKEN: a scripted viewer's fixed token
     serve = subprocess.Popen([sys.executable, "-m", "hil.cli.main", "serve", "--link", "stub",
                               "--enable", "--speed-rpm", "1500", "--modbus", "off",
                               "--duration", "12", "--pace", "realtime",
                               "--live", f"127.0.0.1:{port}"],
-                             cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                             cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                             env={**os.environ, "HIL_LIVE_TOKEN": token})
     try:
         async def session():
             deadline = time.monotonic() + 20
             while True:
                 try:
-                    ws = await websockets.connect(f"ws://127.0.0.1:{port}",
+                    ws = await websockets.connect(f"ws://127.0.0.1:{port}/?token={token}",
                                                   subprotocols=[SUBPROTOCOL])
                     break
                 except OSError:
@@ -127,7 +130,7 @@ def test_a_viewer_sees_the_speed_follow_the_reference_and_changes_it(tmp_path):
     finally:
         serve.terminate()
         out, err = serve.communicate(timeout=20)
-    assert f"live (Foxglove) on ws://127.0.0.1:{port}" in err
+    assert f"live (Foxglove) on ws://127.0.0.1:{port}/?token={token}" in err
     assert "hil serve: live:" not in err          # every /cmd message was taken
 
 
@@ -265,8 +268,7 @@ def test_rows_reach_the_server_in_batches_and_only_for_subscribed_channels():
         assert calls == [] and stream.flushes == 0          # nobody subscribed: nothing packed
 
         async def watch_and_hand_over():
-            async with websockets.connect(f"ws://127.0.0.1:{stream.port}",
-                                          subprotocols=[SUBPROTOCOL]) as ws:
+            async with websockets.connect(stream.url, subprotocols=[SUBPROTOCOL]) as ws:
                 viewer = Viewer(ws)
                 await viewer.advertised({"/plant/truth", "/ctrl/telemetry", "/plant/sensors"})
                 await viewer.subscribe(["/plant/truth"])

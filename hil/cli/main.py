@@ -93,6 +93,9 @@ def _parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
         run.add_argument("--no-progress", action="store_true", help="no progress bar")
         run.add_argument("--live", metavar="[HOST:]PORT", nargs="?", const="127.0.0.1:8765",
                          help="Foxglove WebSocket server while the plans run (default 127.0.0.1:8765)")
+        run.add_argument("--live-origin", metavar="ORIGIN", action="append", default=None,
+                         help="a web origin allowed to open the live view besides Foxglove's app "
+                              "(repeatable; docs/live.md)")
 
     if only in (None, "serve"):
         serve = sub.add_parser("serve", help="run the plant alone for an external board",
@@ -118,6 +121,9 @@ def _parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
                            help="enable the board at start (otherwise: Modbus run bit)")
         serve.add_argument("--live", metavar="[HOST:]PORT", nargs="?", const="127.0.0.1:8765",
                            help="Foxglove WebSocket server for live viewing (default 127.0.0.1:8765)")
+        serve.add_argument("--live-origin", metavar="ORIGIN", action="append", default=None,
+                           help="a web origin allowed to open the live view besides Foxglove's app "
+                                "(repeatable; docs/live.md)")
         serve.add_argument("--live-rate-hz", type=float, default=1000.0,
                            help="rows per second of simulated time sent to viewers (default 1000)")
         serve.add_argument("--pace", choices=("fast", "realtime"), default="fast",
@@ -166,6 +172,9 @@ def _parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
         sweep.add_argument("--resume", action="store_true",
                            help="continue an interrupted sweep in --out without repeating finished runs")
         sweep.add_argument("--no-progress", action="store_true", help="no progress bar")
+        sweep.add_argument("--allow-programs", action="store_true",
+                           help="run a sweep whose link (exec:, lib:, qemu:) runs a program it names "
+                                "(only for sweep files you trust)")
 
     if only in (None, "init"):
         init = sub.add_parser("init", help="scaffold a bench project for your motor and firmware",

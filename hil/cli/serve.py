@@ -27,8 +27,8 @@ def parse_host_port(text: str, default_host: str = "127.0.0.1") -> tuple[str, in
 
 
 def serve_command(args) -> int:
-    from hil.faults.injector import MODBUS_BIT_MASK
     from hil.ports.modbus import ControlMailbox, ModbusPort
+    from hil.session.control_inputs import ControlLimits
 
     profile = load_bench_profile(args.profile)
     board = None
@@ -36,6 +36,9 @@ def serve_command(args) -> int:
         from hil.boards import load_board
 
         board = load_board(args.board)
+    # the one range check of every control input, from the profile (hil/session/control_inputs.py)
+    limits = ControlLimits.from_profile(profile)
+    limits.speed_ref_rpm(args.speed_rpm, "--speed-rpm")
     config = SessionConfig(link=args.link, mode=args.mode, log_path=args.log,
                            log_compression=args.log_compression, board=board,
                            profile_label=str(args.profile) if args.profile else "paper")
@@ -47,20 +50,22 @@ def serve_command(args) -> int:
         host, number = parse_host_port(args.modbus)
         # A Modbus request holds the interpreter for 0.1-0.3 ms: in real time the port
         # runs in its own process so that it cannot stall a period.
-        port = ModbusPort(mailbox, host=host, port=number, fault_bits_mask=MODBUS_BIT_MASK,
+        port = ModbusPort(mailbox, host=host, port=number, limits=limits,
                           isolation="process" if args.mode == "realtime" else "thread")
     chunk = max(1, round(0.01 / profile.control_period_s))  # 10 ms of simulated time
     total = None if args.duration is None else round(args.duration / profile.control_period_s)
     live = None
     pace = getattr(args, "pace", "fast")
     if getattr(args, "live", None):
+        from hil.live.gate import FOXGLOVE_ORIGINS
         from hil.live import LiveStream, parse_live_address
 
         live_host, live_port = parse_live_address(args.live)
         live = LiveStream(live_host, live_port, period_s=profile.control_period_s,
-                          rate_hz=args.live_rate_hz, mode=args.mode, pace=pace)
+                          rate_hz=args.live_rate_hz, mode=args.mode, pace=pace,
+                          origins=FOXGLOVE_ORIGINS + tuple(getattr(args, "live_origin", None) or ()))
         # viewers' parameters take the Modbus port's path into the session
-        live.attach_mailbox(mailbox)
+        live.attach_mailbox(mailbox, limits)
     try:
         return _serve(args, profile, config, mailbox, port, live, chunk, total, pace)
     finally:
@@ -126,7 +131,7 @@ def _serve(args, profile, config, mailbox, port, live, chunk, total, pace: str) 
         where = f", Modbus TCP on {port.host}:{port.port}" if port is not None else ""
         if live is not None:
             session.recorder.live = live
-            where += f", live (Foxglove) on {live.url}"
+            where += f", live (Foxglove) on {live.url} (open in the app: {live.app_url})"
         print(f"hil serve: board '{session.board_name}' on {args.link}{where}; Ctrl-C stops",
               file=sys.stderr)
         ran = 0

@@ -15,28 +15,35 @@ very one the Modbus port writes, so the session applies a viewer's change betwee
 it does a Modbus write (and a Modbus read of the holding registers shows it). `pace` is the
 viewer's choice of how `hil serve` runs: paced to real time or as fast as it can.
 
-The server binds to 127.0.0.1 unless another host is given.
+The server binds to 127.0.0.1 unless another host is given, and takes only viewers that open
+the URL it prints (its token) from an allowed Origin: hil.live.gate, docs/live.md. /cmd is
+applied only from connections the gate let through.
 """
 from __future__ import annotations
 
 import json
-import math
+import os
+import secrets
 import struct
 import threading
+from urllib.parse import quote
 
 import foxglove
 from foxglove.websocket import Capability, ServerListener
 
 from hil.logs.mcap_writer import FIXED_TYPES, fixed_descriptor_set, tag_varint
+from hil.live.gate import FOXGLOVE_ORIGINS, LiveGate
+from hil.session.control_inputs import UNBOUNDED, ControlInputError
 
 COMMAND_TOPIC = "/cmd"
 #: Rows (periods handed over by the recorder) given to the server at once; see the module doc.
 FLUSH_ROWS = 16
 #: /cmd key -> (type, the mailbox's request field); `pace` is the stream's own
-COMMAND_KEYS = {"speed_ref_rpm": (float, "speed_ref_rpm"), "enable": (bool, "run"),
-                "load_torque_nm": (float, "load_torque_nm"), "fault_bits": (int, "fault_bits"),
-                "pace": (str, None)}
+COMMAND_KEYS = {"speed_ref_rpm": "speed_ref_rpm", "enable": "run",
+                "load_torque_nm": "load_torque_nm", "fault_bits": "fault_bits", "pace": None}
 PACES = ("fast", "realtime")
+#: A fixed token for scripted viewers (and saved Foxglove connections); unset: a new one a run.
+TOKEN_ENV = "HIL_LIVE_TOKEN"
 
 
 def parse_live_address(text: str, default_port: int = 8765) -> tuple[str, int]:
@@ -64,25 +71,6 @@ def payload_struct(fields: list[tuple[str, str]]) -> tuple[struct.Struct, tuple[
     return struct.Struct(fmt), tuple(tags)
 
 
-def _command_value(key: str, kind: type, value):
-    """A /cmd value as its field takes it, or ValueError naming the key. JSON as Python parses
-    it allows NaN, Infinity and null, and a bool is an int: each is refused where it does not
-    belong rather than turned into something the board would act on."""
-    if kind is bool:
-        if type(value) is bool or (type(value) is int and value in (0, 1)):
-            return bool(value)
-        raise ValueError(f"'{key}': expected true or false, got {value!r}")
-    if type(value) not in (int, float):
-        raise ValueError(f"'{key}': expected a number, got {value!r}")
-    if not math.isfinite(value):
-        raise ValueError(f"'{key}': expected a finite number, got {value!r}")
-    if kind is int:
-        if value != int(value):
-            raise ValueError(f"'{key}': expected a whole number, got {value!r}")
-        return int(value)
-    return float(value)
-
-
 class _FixedTopic:
     def __init__(self, context, topic: str, message_name: str, fields: list[tuple[str, str]],
                  metadata: dict[str, str]):
@@ -104,11 +92,16 @@ class _Listener(ServerListener):
     """Collects what viewers publish on /cmd; everything else is ignored (the base class's
     no-op callbacks: without them the server prints 'Callback failed' on each subscribe)."""
 
-    def __init__(self, stream: "LiveStream"):
+    def __init__(self, stream: "LiveStream", auth_topic: str):
         self._stream = stream
+        self._auth_topic = auth_topic
         self._topics: dict[tuple[int, int], str] = {}
+        self._admitted: set[int] = set()     # client ids the gate let through
 
     def on_client_advertise(self, client, channel) -> None:
+        if channel.topic == self._auth_topic:
+            self._admitted.add(client.id)
+            return
         self._topics[(client.id, channel.id)] = channel.topic
 
     def on_client_unadvertise(self, client, client_channel_id: int) -> None:
@@ -116,7 +109,11 @@ class _Listener(ServerListener):
 
     def on_message_data(self, client, client_channel_id: int, data: bytes) -> None:
         if self._topics.get((client.id, client_channel_id)) == COMMAND_TOPIC:
-            self._stream._command(data)
+            if client.id in self._admitted:
+                self._stream._command(data)
+            else:                            # on the SDK's own port, past the gate
+                self._stream._refused(f"{COMMAND_TOPIC} from a connection that did not come "
+                                      f"through the gate; not applied", command=True)
 
 
 class LiveStream:
@@ -124,7 +121,8 @@ class LiveStream:
 
     def __init__(self, host: str = "127.0.0.1", port: int = 8765, *, period_s: float,
                  rate_hz: float = 1000.0, mode: str = "lockstep", name: str = "hil-bench",
-                 pace: str = "fast"):
+                 pace: str = "fast", token: str | None = None,
+                 origins: tuple[str, ...] = FOXGLOVE_ORIGINS):
         from plant_rt import TRUTH_FIELDS
 
         from hil.logs.recorder import SENSOR_FIELDS, TELEMETRY_FIELDS
@@ -140,6 +138,8 @@ class LiveStream:
         self._mailbox = None
         self.pace = pace
         self.commands_taken = 0              # /cmd messages accepted (tests count them)
+        self.commands_refused = 0            # /cmd messages refused, whatever the reason
+        self._limits = UNBOUNDED             # hil.session.control_inputs: the ranges
         self._lock = threading.Lock()
         self._context = foxglove.Context()
         # Lockstep runs as fast as it can: the viewer is told that simulated time is not wall time.
@@ -157,11 +157,20 @@ class LiveStream:
                                      [("period", "fixed32")] + [(f, "fixed32" if i < 4 else "float")
                                                                 for i, f in enumerate(TELEMETRY_FIELDS)],
                                      metadata)
+        # The SDK's server on an ephemeral loopback port, the gate on the one asked for.
+        self.token = token or os.environ.get(TOKEN_ENV) or secrets.token_urlsafe(18)
+        auth_topic = f"/hil/gate/{secrets.token_hex(16)}"
         self.server = foxglove.start_server(
-            name=name, host=host, port=port, context=self._context,
+            name=name, host="127.0.0.1", port=0, context=self._context,
             capabilities=[Capability.ClientPublish], supported_encodings=["json"],
-            server_listener=_Listener(self), message_backlog_size=1024)
-        self.host, self.port = host, self.server.port
+            server_listener=_Listener(self, auth_topic), message_backlog_size=1024)
+        try:
+            self.gate = LiveGate(host, port, self.server.port, self.token, origins, auth_topic,
+                                 on_refusal=self._refused)
+        except BaseException:
+            self.server.stop()
+            raise
+        self.host, self.port = host, self.gate.port
 
     def follow(self, period_s: float) -> "LiveStream":
         """The next session's control period (one server serves every plan of a `hil run`)."""
@@ -173,7 +182,14 @@ class LiveStream:
 
     @property
     def url(self) -> str:
-        return f"ws://{self.host}:{self.port}"
+        """The address to open (with the token: the gate refuses it without)."""
+        return f"ws://{self.host}:{self.port}/?token={self.token}"
+
+    @property
+    def app_url(self) -> str:
+        """Foxglove's web app opening this stream."""
+        return ("https://app.foxglove.dev/?ds=foxglove-websocket&ds.url="
+                + quote(self.url, safe=""))
 
     # ------------------------------------------------------------- from the recorder
     def period(self, k: int, truth: tuple, sample) -> None:
@@ -203,11 +219,13 @@ class LiveStream:
             self.flushes += 1
 
     # ------------------------------------------------------------- from the viewers
-    def attach_mailbox(self, mailbox) -> None:
+    def attach_mailbox(self, mailbox, limits=None) -> None:
         """Where viewers' parameter changes go: a ControlMailbox (anything with
-        request(**fields) -> bool). Without one, /cmd parameters are refused with an error
-        (a `hil run` takes its stimuli from the plan)."""
+        request(**fields) -> bool), and the ranges they must lie in (a ControlLimits, made
+        from the bench profile; None: finite and float32 only). Without a mailbox, /cmd
+        parameters are refused with an error (a `hil run` takes its stimuli from the plan)."""
         self._mailbox = mailbox
+        self._limits = limits if limits is not None else UNBOUNDED
 
     def _command(self, data: bytes) -> None:
         try:
@@ -219,32 +237,45 @@ class LiveStream:
             for key, value in msg.items():
                 if key not in COMMAND_KEYS:
                     raise ValueError(f"unknown key '{key}' (known: {', '.join(COMMAND_KEYS)})")
-                kind, field = COMMAND_KEYS[key]
+                field = COMMAND_KEYS[key]
                 if field is None:
                     if value not in PACES:
                         raise ValueError(f"'pace': expected one of {', '.join(PACES)}, got {value!r}")
                     pace = value
                 else:
-                    request[field] = _command_value(key, kind, value)
+                    try:
+                        request[field] = self._limits.request(field, value)
+                    except ControlInputError as exc:
+                        raise ValueError(f"'{key}': {exc.why}, got {value!r}") from None
             if request and self._mailbox is None:
                 raise ValueError("this run takes no parameters from viewers (hil serve does)")
             if request and not self._mailbox.request(**request):
                 raise ValueError("the control mailbox stayed busy for a second; not applied")
         except (ValueError, TypeError) as exc:
             with self._lock:
-                self.errors.append(f"{COMMAND_TOPIC}: {exc}")
+                self.errors.append(f"{COMMAND_TOPIC}: {exc}; not applied")
+                self.commands_refused += 1
             return
         with self._lock:
             if pace is not None:
                 self.pace = pace
             self.commands_taken += 1
 
+    def _refused(self, text: str, command: bool = False) -> None:
+        """A connection or message the gate or the listener turned away (for the console)."""
+        with self._lock:
+            self.errors.append(text)
+            self.commands_refused += command
+
     def take_errors(self) -> list[str]:
-        """Errors in what viewers published since the last call (for the console)."""
+        """Errors in what viewers published, and connections the gate refused, since the
+        last call (for the console)."""
+        self.gate.poll()
         with self._lock:
             out, self.errors = self.errors, []
         return out
 
     def close(self) -> None:
         self.flush()
+        self.gate.stop()
         self.server.stop()

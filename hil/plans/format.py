@@ -30,7 +30,8 @@ from hil.plans.units import Quantity, UnitError, canonical, compatible, unit as 
 from hil.boards.standard import STANDARD_PARAMS
 from configfile.schema import (BOOLEAN, FRACTION, NAME, NON_NEGATIVE, NUMBER, POSITIVE, POSITIVE_INT,
                                SchemaChecker, obj, python_type)
-from configfile.source import ConfigError, KeyPath, YamlDocument, load_yaml, parse_yaml
+from configfile.source import ConfigError, KeyPath, YamlDocument, format_key, load_yaml, parse_yaml
+from hil.session.control_inputs import UNBOUNDED, ControlInputError, ControlLimits
 from hil.faults.catalog import FAULTS, PLANT_PARAMS
 
 # SPEC 8's standard parameters a plan may PARAM_SET on any board that takes them. A board's
@@ -551,6 +552,40 @@ def plan_files(paths: Iterable[str | Path]) -> list[Path]:
     return out
 
 
+def _step_inputs(step: "Step"):
+    """(key path below the step, value, check) of every control input a step holds."""
+    if isinstance(step, CommandStep):
+        for key, value in step.changes().items():
+            yield (key,), value, lambda limits, v, key=key: limits.command({key: v})
+    elif isinstance(step, LoadStep):
+        torque = lambda limits, v: limits.torque_nm(v)   # noqa: E731
+        for key in ("torque_nm", "offset_nm"):
+            if getattr(step, key) is not None:
+                yield (key,), getattr(step, key), torque
+        for j, (_, value) in enumerate(step.points):
+            yield ("points", j, 1), value, torque
+        if step.nm_per_rad_s is not None:
+            yield ("nm_per_rad_s",), step.nm_per_rad_s, lambda limits, v: limits.load_damping(v)
+    elif isinstance(step, DcLinkStep):
+        yield ("voltage_v",), step.voltage_v, lambda limits, v: limits.dc_link_voltage_v(v)
+
+
+def check_control_inputs(steps: Iterable["Step"], limits: ControlLimits, source: str,
+                         line_of: Callable[[KeyPath], int | None] | None = None) -> None:
+    """Every command, load and DC-link value of the steps within `limits`
+    (hil.session.control_inputs, the validator of every control input); ConfigError naming
+    the file, the line and the key of the first one outside."""
+    for step in steps:
+        for sub, value, check in _step_inputs(step):
+            try:
+                check(limits, value)
+            except ControlInputError as exc:
+                path = ("steps", step.index, step.kind) + sub
+                line = line_of(path) if line_of is not None else step.line
+                raise ConfigError(f"{value!r} refused: {exc.why}", source, line,
+                                  format_key(path)) from None
+
+
 def _build(doc: YamlDocument, path: Path) -> Plan:
     # jsonschema only for a plan the quick check does not accept (plant_rt.profile)
     v = SchemaChecker(doc, {LINK_PATTERN: "stub, stub-pty, stub-can, qemu, serial:PORT or can:INTERFACE:CHANNEL"})
@@ -583,6 +618,8 @@ def _build(doc: YamlDocument, path: Path) -> Plan:
             raise doc.error(("board",), f"board file not found: {board_path}")
     state = _BuildState(doc, v, str(doc.source), tuple(r.label for r in refs))
     steps = tuple(state.step(raw, i) for i, raw in enumerate(data["steps"]))
+    # finite and float32 now; the profile's ranges when a run has chosen its profile
+    check_control_inputs(steps, UNBOUNDED, str(doc.source), doc.line_of)
     plots = tuple(state.plot(raw, i) for i, raw in enumerate(data.get("plots", [])))
     return Plan(
         name=data["name"], description=data.get("description", "").strip(),

@@ -27,13 +27,15 @@ import multiprocessing
 import signal
 import socket
 import threading
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, NamedTuple
 
 from pymodbus.constants import ExcCodes
 from pymodbus.framer import FramerType
 from pymodbus.server import ModbusSerialServer, ModbusTcpServer
 from pymodbus.simulator import DataType, SimData, SimDevice
+
+from hil.session.control_inputs import UNBOUNDED, ControlInputError, ControlLimits
 
 REGISTER_MAP_VERSION = 2  # 2: speed_reference (holding 5-6)
 _TYPES = {"int16": (1, True), "uint16": (1, False), "int32": (2, True), "uint32": (2, False)}
@@ -165,6 +167,7 @@ class _Shared(ctypes.Structure):
         ("snapshot", ctypes.c_double * len(PlantSnapshot._fields)),
         ("requests_served", ctypes.c_uint64),
         ("publishes_skipped", ctypes.c_uint64),
+        ("writes_refused", ctypes.c_uint64),  # writes outside ControlLimits (exception 3)
     ]
 
 
@@ -272,6 +275,14 @@ class ControlMailbox:
         """Modbus requests the port has handled (reads and writes)."""
         return self._shared.requests_served
 
+    @property
+    def writes_refused(self) -> int:
+        """Writes the port refused (a value outside its ControlLimits: exception 3)."""
+        return self._shared.writes_refused
+
+    def _count_refusal(self) -> None:
+        self._shared.writes_refused += 1  # only the port writes it; a statistic, no lock
+
     def _count_request(self) -> None:
         self._shared.requests_served += 1  # only the port writes it; a statistic, no lock
 
@@ -291,6 +302,7 @@ class _PortConfig:
     dc_link_voltage_limit_v: float | None
     fault_bits_mask: int
     speed_ref_limit_rpm: float | None = None
+    limits: ControlLimits = UNBOUNDED
 
 
 class _PortServer:
@@ -395,30 +407,27 @@ class _PortServer:
         return None
 
     def _apply(self, changed: dict[str, float | int]) -> ExcCodes | None:
-        """Validate decoded writes and post them to the mailbox; all or nothing."""
-        cfg = self.config
+        """Validate decoded writes (hil.session.control_inputs, the one validator of every
+        control input) and post them to the mailbox; all or nothing."""
+        limits = self.config.limits
         requests: dict[str, Any] = {}
-        for name, value in changed.items():
-            if name == "load_torque":
-                if cfg.load_torque_limit_nm is not None and abs(value) > cfg.load_torque_limit_nm:
-                    return ExcCodes.ILLEGAL_VALUE
-                requests["load_torque_nm"] = round(value, 3)
-            elif name == "dc_link_voltage_setpoint":
-                if cfg.dc_link_voltage_limit_v is not None and value > cfg.dc_link_voltage_limit_v:
-                    return ExcCodes.ILLEGAL_VALUE
-                requests["dc_link_voltage_v"] = round(value, 2)
-            elif name == "run":
-                if value not in (0, 1):
-                    return ExcCodes.ILLEGAL_VALUE
-                requests["run"] = bool(value)
-            elif name == "fault_injection":
-                if value & ~cfg.fault_bits_mask:
-                    return ExcCodes.ILLEGAL_VALUE
-                requests["fault_bits"] = int(value)
-            elif name == "speed_reference":
-                if cfg.speed_ref_limit_rpm is not None and abs(value) > cfg.speed_ref_limit_rpm:
-                    return ExcCodes.ILLEGAL_VALUE
-                requests["speed_ref_rpm"] = round(value, 2)
+        try:
+            for name, value in changed.items():
+                if name == "load_torque":
+                    requests["load_torque_nm"] = round(limits.torque_nm(value), 3)
+                elif name == "dc_link_voltage_setpoint":
+                    requests["dc_link_voltage_v"] = round(limits.dc_link_voltage_v(value), 2)
+                elif name == "run":
+                    if value not in (0, 1):
+                        raise ControlInputError("run", value, "1 runs, 0 stops")
+                    requests["run"] = bool(value)
+                elif name == "fault_injection":
+                    requests["fault_bits"] = limits.fault_bits(int(value))
+                elif name == "speed_reference":
+                    requests["speed_ref_rpm"] = round(limits.speed_ref_rpm(value), 2)
+        except ControlInputError:
+            self.mailbox._count_refusal()
+            return ExcCodes.ILLEGAL_VALUE
         if requests and not self.mailbox.request(**requests):
             return ExcCodes.DEVICE_BUSY
         return None
@@ -469,16 +478,17 @@ class ModbusPort:
     ``isolation``: "thread" runs the server in a thread of this process with its own
     asyncio loop; "process" runs it in a spawned process, so that handling a request
     never holds this process's GIL (in a thread each request stalls the session for
-    about 0.1-0.6 ms: see docs/modbus.md). Writes outside ``load_torque_limit_nm``
-    (absolute), ``dc_link_voltage_limit_v``, ``fault_bits_mask`` or ``speed_ref_limit_rpm``
-    (absolute) are refused with Modbus exception 3 (illegal data value).
-    """
+    about 0.1-0.6 ms: see docs/modbus.md). Writes outside ``limits`` (a
+    hil.session.control_inputs.ControlLimits, usually ``ControlLimits.from_profile``), or
+    outside ``load_torque_limit_nm`` (absolute), ``dc_link_voltage_limit_v``,
+    ``fault_bits_mask`` or ``speed_ref_limit_rpm`` (absolute) where given, are refused with
+    Modbus exception 3 (illegal data value) and counted (``mailbox.writes_refused``)."""
 
     def __init__(self, mailbox: ControlMailbox, host: str | None = "127.0.0.1", port: int = 5020,
                  rtu_port: str | None = None, *, rtu_baudrate: int = 19200, rtu_device_id: int = 1,
                  load_torque_limit_nm: float | None = None,
                  dc_link_voltage_limit_v: float | None = None, fault_bits_mask: int = 0xFFFFFFFF,
-                 speed_ref_limit_rpm: float | None = None,
+                 speed_ref_limit_rpm: float | None = None, limits: ControlLimits | None = None,
                  isolation: str = "thread", start_timeout_s: float = 10.0):
         if host is None and rtu_port is None:
             raise ValueError("ModbusPort: give a TCP host or an RTU serial port (or both)")
@@ -492,8 +502,15 @@ class ModbusPort:
         self.rtu_port = rtu_port
         self.isolation = isolation
         self.start_timeout_s = start_timeout_s
+        # The ranges: a profile's ControlLimits, each explicit limit given here overriding it.
+        limits = limits if limits is not None else UNBOUNDED
+        explicit = {"load_torque_max_nm": load_torque_limit_nm, "dc_link_max_v": dc_link_voltage_limit_v,
+                    "speed_ref_max_rpm": speed_ref_limit_rpm,
+                    "fault_bits_mask": None if limits.fault_bits_mask is not None and fault_bits_mask == 0xFFFFFFFF
+                    else fault_bits_mask}
+        limits = replace(limits, **{k: v for k, v in explicit.items() if v is not None})
         self._config = _PortConfig(host, port, rtu_port, rtu_baudrate, rtu_device_id, load_torque_limit_nm,
-                                   dc_link_voltage_limit_v, fault_bits_mask, speed_ref_limit_rpm)
+                                   dc_link_voltage_limit_v, fault_bits_mask, speed_ref_limit_rpm, limits)
         self.tcp_address: tuple[str, int] | None = None
         self._thread: threading.Thread | None = None
         self._loop: asyncio.AbstractEventLoop | None = None

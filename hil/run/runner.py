@@ -29,13 +29,15 @@ from hil.plans.checks import evaluate_check
 from hil.plans.outcome import CheckResult, Outcome, PlanResult, StepResult, plan_outcome
 from hil.plans.format import (
     PROFILE_NAMES, CheckStep, ProfileRef, resolve_profile, CommandStep, DcLinkStep, FaultStep, LoadStep, MarkStep, ParamSetStep,
-    Plan, PlantParamStep, RunStep, WaitReadyStep, WaitUntilStep, load_plan, plan_files,
+    Plan, PlantParamStep, RunStep, WaitReadyStep, WaitUntilStep, check_control_inputs, load_plan,
+    plan_files,
 )
 from hil.logs.recorder import SENSOR_FIELDS, TELEMETRY_FIELDS, COMMAND_FIELDS
 from hil.reports.html import slug, write_reports, write_summary
 from hil.session.bench_session import BenchSession, SessionConfig, SessionError
 from hil.session.bench_session import _fault_text as fault_text    # SPEC 2.9's wording
 from hil.session.board_state import fault_name
+from hil.session.control_inputs import ControlLimits
 from hil.plans.signals import SignalSet
 from configfile.dataclass_methods import dataclass
 from configfile.source import ConfigError
@@ -288,6 +290,8 @@ def _run(plan: Plan, opts: RunOptions) -> tuple[PlanResult, SignalSet]:
         profile = profile_for(plan, ref)
         board = board_for(plan, link, opts.board)
         check_plan_board(plan, board)
+        # the plan's commands and loads within this profile's ranges, before any period
+        check_control_inputs(plan.steps, ControlLimits.from_profile(profile), str(plan.source_path))
         config = SessionConfig(link=link, mode=mode, log_path=log_path, seed=opts.seed,
                                log_compression=opts.log_compression, board=board,
                                profile_label=ref.label,
@@ -302,7 +306,7 @@ def _run(plan: Plan, opts: RunOptions) -> tuple[PlanResult, SignalSet]:
         if opts.live is not None:
             session.recorder.live = opts.live.follow(session.period_s)
         if opts.modbus is not None:
-            from hil.faults.injector import MODBUS_BIT_MASK, apply_fault_bits
+            from hil.faults.injector import apply_fault_bits
             from hil.ports.modbus import ControlMailbox, ModbusPort
 
             mailbox = ControlMailbox(load_torque_nm=profile.load.torque_nm,
@@ -310,7 +314,7 @@ def _run(plan: Plan, opts: RunOptions) -> tuple[PlanResult, SignalSet]:
             session.attach_mailbox(mailbox, on_fault_bits=lambda bits: apply_fault_bits(session, bits))
             port = ModbusPort(mailbox, host=opts.modbus[0], port=opts.modbus[1],
                               isolation="process" if mode == "realtime" else "thread",
-                              fault_bits_mask=MODBUS_BIT_MASK)
+                              limits=ControlLimits.from_profile(profile))
             port.start()
         deadline = None if plan.timeout_s is None else wall0 + plan.timeout_s
         _execute(plan, session, stimuli, state, deadline, opts.progress, opts.on_step)
@@ -577,8 +581,12 @@ def run_command(args) -> int:
         from hil.live import LiveStream, parse_live_address
 
         live_host, live_port = parse_live_address(args.live)
-        live = LiveStream(live_host, live_port, period_s=50e-6, mode=args.mode or "lockstep")
-        print(f"hil run: live (Foxglove) on {live.url}", file=sys.stderr)
+        from hil.live.gate import FOXGLOVE_ORIGINS
+
+        live = LiveStream(live_host, live_port, period_s=50e-6, mode=args.mode or "lockstep",
+                          origins=FOXGLOVE_ORIGINS + tuple(getattr(args, "live_origin", None) or ()))
+        print(f"hil run: live (Foxglove) on {live.url} (open in the app: {live.app_url})",
+              file=sys.stderr)
     out = Path(args.out)
     try:
         out.mkdir(parents=True, exist_ok=True)
@@ -624,6 +632,9 @@ def run_command(args) -> int:
             console.close()
             if bar is not None:
                 bar.remove_task(task)          # its verdict line below says how it ended
+            if live is not None:              # connections refused, /cmd turned away
+                for error in live.take_errors():
+                    print(f"hil run: live: {error}", file=sys.stderr)
             plan_dir = out / plan_dir_name(plan, ref)
             entries.append((result, {"dir": plan_dir, "html": plan_dir / "report.html",
                                      "junit": plan_dir / "junit.xml", "json": plan_dir / "result.json",

@@ -34,6 +34,7 @@ from hil.links.registry import BoardConnection, connect
 from hil.logs.recorder import COMMAND_FIELDS, Recorder
 from hil.session.board_params import board_parameters, default_board
 from hil.session.board_state import BoardState
+from hil.session.control_inputs import ControlInputError, ControlLimits
 from hil.session.cpu_latency import CpuLatencyHold
 from hil.session.errors import SessionError
 from hil.session.link_tap import LinkTap, tappable
@@ -51,6 +52,9 @@ _ANSWER_CAPS = {Gates: CAP_GATES, Duty: CAP_DUTY, DutyLegs: CAP_DUTY_LEGS}
 LEG_ENABLE_SIGNAL = "ctrl.leg_enable"
 _LOOP_PENDING, _LOOP_STOPPED, _LOOP_LINK_ERROR = 2, 3, 4
 _TRUTH_INDEX = {name: i for i, name in enumerate(TRUTH_FIELDS)}
+# events that change what drives the plant (the suspects when its state stops being finite)
+_INPUT_EVENTS = frozenset({"command", "modbus", "load", "dc_link", "plant_param", "fault",
+                           "stimulus", "param"})
 
 
 @dataclass
@@ -428,6 +432,7 @@ class BenchSession:
         unknown = set(changes) - set(COMMAND_FIELDS)
         if unknown:
             raise ValueError(f"unknown command field(s): {', '.join(sorted(unknown))}")
+        changes = self.control_limits.command(changes)   # ControlInputError names a bad one
         if "enable" in changes and bool(changes["enable"]) != self.command_state.enable:
             self.board_state.enable_changed(self.plant.period)  # not ready until it says so
         self.command_state = replace(self.command_state, **changes)
@@ -435,6 +440,20 @@ class BenchSession:
         self.conn.link.send(msg)
         self.recorder.command(self.plant.period, self.command_state.row())
         self._event("command", dict(changes))
+
+    @property
+    def control_limits(self) -> ControlLimits:
+        """The ranges of every control input (hil/session/control_inputs.py), from the profile."""
+        limits = self.__dict__.get("_control_limits")
+        if limits is None:
+            limits = self._control_limits = ControlLimits.from_profile(self.profile)
+        return limits
+
+    def _refuse_input(self, source: str, exc: ControlInputError) -> None:
+        """A control input refused on its way in: counted, named in an event; the run goes on."""
+        self.inputs_refused = getattr(self, "inputs_refused", 0) + 1
+        self._event("input_refused", {"source": source, "input": exc.name, "value": repr(exc.value),
+                                      "reason": exc.why})
 
     @property
     def board_name(self) -> str:
@@ -482,9 +501,34 @@ class BenchSession:
     # --------------------------------------------------------------- running
     def run_periods(self, count: int, stop: Callable[[], bool] | None = None) -> int:
         """Advances up to ``count`` periods (lockstep or real time); returns how many ran."""
-        if self.config.mode == "realtime":
-            return run_realtime(self, count, stop)
-        return self._run_lockstep(count, stop)
+        first = self.plant.period
+        try:
+            if self.config.mode == "realtime":
+                ran = run_realtime(self, count, stop)
+            else:
+                ran = self._run_lockstep(count, stop)
+        except (ValueError, OverflowError) as exc:   # int(NaN) in the sensors, math on inf
+            self._check_plant_finite(first, exc)
+            raise
+        self._check_plant_finite(first)
+        return ran
+
+    def _check_plant_finite(self, first: int, exc: Exception | None = None) -> None:
+        """Once per run_periods call (the period loop is not slowed): a plant state that is
+        no longer finite ends the run in ERROR, naming the quantity and the last input."""
+        bad = self.plant.non_finite_state()
+        if bad is None:
+            return
+        self.plant.safe_state()
+        k = self.plant.period
+        cause = next(((t, kind, data) for t, kind, data in reversed(self.events)
+                      if kind in _INPUT_EVENTS), None)
+        last = (f"; the last input before it: {cause[1]} {_jsonable(cause[2])} at t = "
+                f"{cause[0]:.6g} s" if cause is not None else "; no input was changed")
+        self.error = (f"the plant's state is no longer finite at period {k} (t = {k * self.period_s:.6g} s; "
+                      f"finite at period {first}): {bad[0]} = {bad[1]!r}{last}")
+        self._event("plant_not_finite", {"period": k, "quantity": bad[0], "reason": self.error})
+        raise SessionError(self.error) from exc
 
     def _run_lockstep(self, count: int, stop: Callable[[], bool] | None) -> int:
         """SPEC 2.8.1: one deadline per SAMPLE sent; SAMPLE(k) is resent (same values) up to
@@ -798,6 +842,16 @@ class BenchSession:
         req = mailbox.take_requests()
         if req is None:
             return
+        # the port checked them; a mailbox written by another hand is checked here too
+        limits = self.control_limits
+        checked = {}
+        for name, value in vars(req).items():
+            if value is not None:
+                try:
+                    checked[name] = limits.request(name, value)
+                except ControlInputError as exc:
+                    self._refuse_input("mailbox", exc)
+        req = type(req)(**checked)
         plant = self.plant
         if req.load_torque_nm is not None:
             plant.load.set_constant(req.load_torque_nm)

@@ -74,7 +74,9 @@ class LocalExecutor:
                         in_flight.clear()
                         broken = True
                         break
-                    for fut in done:
+                    # cf.wait hands a set: in index order, so that one worker writes its
+                    # rows in order (several finish in any order: results.py)
+                    for fut in sorted(done, key=lambda f: in_flight[f]["index"]):
                         task = in_flight.pop(fut)
                         try:
                             on_row(fut.result())

@@ -45,6 +45,10 @@ SAMPLING = ("monte_carlo", "latin_hypercube")
 PARALLEL_LINK_PATTERN = r"^(stub|stub-pty|stub-can|qemu|lib:.+|exec:.+|qemu:.+)$"
 PARALLEL_LINK_WORDS = "stub, stub-pty, stub-can, qemu, lib:PATH, exec:PATH or qemu:IMAGE " \
                       "(a physical board runs one plan at a time: see docs/scale.md)"
+# Links that run a program named by the sweep file on this machine: a sweep from someone else
+# must not run their program unasked (hil sweep --allow-programs; docs/scale.md). qemu:
+# too: its image runs with semihosting on, which reaches the host's files.
+PROGRAM_LINK_PREFIXES = ("exec:", "lib:", "qemu:")
 PARAM_PATTERN = r"^(profile|plan)\.[A-Za-z_][A-Za-z0-9_]*(\[[0-9]+\]|\.[A-Za-z_][A-Za-z0-9_]*)*$"
 PARAM_WORDS = "profile.SECTION.KEY or plan.KEY[INDEX].KEY..."
 
@@ -135,6 +139,12 @@ class Sweep:
     keep_failed_logs: bool = True
     keep_passing_logs: float = 0.1
     lines: dict[str, int] = field(default_factory=dict)
+    link_line: int | None = None    # the line of `link:` (None: the default, stub)
+
+    @property
+    def program_link(self) -> bool:
+        """True when the link runs a program the sweep file names (PROGRAM_LINK_PREFIXES)."""
+        return self.link.startswith(PROGRAM_LINK_PREFIXES)
 
     @property
     def grid(self) -> tuple[Parameter, ...]:
@@ -262,7 +272,8 @@ def _build(doc: YamlDocument, path: Path) -> Sweep:
         keep_failed_logs=bool((s.get("logs") or {}).get("failed", True)),
         keep_passing_logs=float((s.get("logs") or {}).get("passing", 0.1)),
         lines={**{n: doc.line_of(base + ("set", n)) for n in fixed},
-               **{p.name: p.line for p in params}})
+               **{p.name: p.line for p in params}},
+        link_line=doc.line_of(base + ("link",)) if "link" in s else None)
     _check_plans(sweep, doc)
     return sweep
 

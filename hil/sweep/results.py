@@ -2,11 +2,14 @@
 
     OUT/sweep.json        what was swept (name, files and their SHA-256, seed, run count)
     OUT/results.jsonl     one JSON row per finished run, appended and flushed as runs finish:
-                          what --resume reads (a torn last line from a kill is ignored)
+                          what --resume reads (a torn last line from a kill is ignored).
+                          A journal: rows in the order runs finished, which with several
+                          workers is the machine's (a row waiting for a slower one would be
+                          lost to a kill); --resume rewrites the rows it keeps by index
+    OUT/results.json      the same rows as JSON, sorted by run index: diff this one
     OUT/results.parquet   the table: one row per run, columns index, plan, point, sample,
                           seed, param.<name>..., outcome, reason, lost, wall_s, sim_s, log,
                           worker, check.<name>.measured / .outcome ... (pyarrow)
-    OUT/results.json      the same rows as JSON, sorted by run index
     OUT/summary.json      yields with Wilson intervals and drivers (hil.sweep.summary)
     OUT/index.html        the yield table and scatter plots (hil.sweep.html)
     OUT/junit.xml         one test case per check, aggregated over the runs

@@ -7,6 +7,7 @@ import sys
 import time
 from pathlib import Path
 
+from configfile.source import ConfigError
 from hil.sweep.executors import DaskExecutor, LocalExecutor
 from hil.sweep.format import Sweep, load_sweep
 from hil.sweep.html import write_html, write_junit
@@ -54,8 +55,19 @@ class _Progress:
             self.bar.stop()
 
 
+def check_programs_allowed(sweep: Sweep, allow_programs: bool) -> None:
+    """A sweep whose link runs a program it names (exec:, lib:, qemu:) runs only when the
+    user says so: running someone else's sweep file must not run their program unasked."""
+    if sweep.program_link and not allow_programs:
+        raise ConfigError(f"link '{sweep.link}' runs the program it names on this machine; "
+                          f"run it only if you trust it: hil sweep --allow-programs",
+                          str(sweep.source_path), sweep.link_line, "sweep.link")
+
+
 def run_sweep(sweep: Sweep, out: Path, workers: int = 1, cluster: str | None = None,
-              resume: bool = False, progress: bool = True, stall_timeout_s: float = 600.0) -> dict:
+              resume: bool = False, progress: bool = True, stall_timeout_s: float = 600.0,
+              allow_programs: bool = False) -> dict:
+    check_programs_allowed(sweep, allow_programs)
     out = Path(out)
     tasks = tasks_for(sweep, out)
     info = manifest(sweep, len(tasks))
@@ -105,7 +117,8 @@ def sweep_command(args) -> int:
     sweep = load_sweep(args.sweep)
     out = args.out or Path("out") / "sweeps" / sweep.name
     summary = run_sweep(sweep, out, workers=args.workers, cluster=args.cluster, resume=args.resume,
-                        progress=not args.no_progress)
+                        progress=not args.no_progress,
+                        allow_programs=getattr(args, "allow_programs", False))
     for p in summary["plans"]:
         lo, hi = p["ci_low"], p["ci_high"]
         print(f"{p['plan']}: yield {p['passed']}/{p['judged']} = {100 * p['yield']:.1f} % "
