@@ -355,26 +355,35 @@ static uint8_t first_nonfinite(const float *values, const uint8_t *quantities, s
 }
 
 /* Everything the running drive acts on: the measurements, the encoder speed, the flux
- * observer's flux and torque, the conventional and the EKF speed and the EKF angle. */
-static uint8_t nonfinite_state(const ctl *c, const clarke_out *i, float vdc_v, float torque_nm, float *value)
+ * observer's flux, its magnitude (which overflows before its components do) and the torque,
+ * the conventional and the EKF speed and the EKF angle. */
+static uint8_t nonfinite_state(const ctl *c, const clarke_out *i, float vdc_v, float flux_mag_wb, float torque_nm,
+                               float *value)
 {
     const ctl_state *st = &c->st;
     float sum = i->i_alpha_a + i->i_beta_a + vdc_v + st->enc.speed_rad_s + st->flux.psi_alpha_wb +
-                st->flux.psi_beta_wb + torque_nm + st->conv.speed_lpf_rad_s + st->ekf.speed_rad_s +
+                st->flux.psi_beta_wb + flux_mag_wb + torque_nm + st->conv.speed_lpf_rad_s + st->ekf.speed_rad_s +
                 st->ekf.theta_filtered_rad;
     if (isfinite(sum)) {
         return PROT_FAULT_NONE;
     }
-    const float values[10] = {i->i_alpha_a,      i->i_beta_a,          vdc_v,
-                              st->enc.speed_rad_s, st->flux.psi_alpha_wb, st->flux.psi_beta_wb,
-                              torque_nm,         st->conv.speed_lpf_rad_s, st->ekf.speed_rad_s,
+    const float values[11] = {i->i_alpha_a,
+                              i->i_beta_a,
+                              vdc_v,
+                              st->enc.speed_rad_s,
+                              st->flux.psi_alpha_wb,
+                              st->flux.psi_beta_wb,
+                              flux_mag_wb,
+                              torque_nm,
+                              st->conv.speed_lpf_rad_s,
+                              st->ekf.speed_rad_s,
                               st->ekf.theta_filtered_rad};
-    static const uint8_t quantities[10] = {
+    static const uint8_t quantities[11] = {
         HIL_NONFINITE_PHASE_CURRENT,  HIL_NONFINITE_PHASE_CURRENT,  HIL_NONFINITE_DC_LINK_VOLTAGE,
         HIL_NONFINITE_MEASURED_SPEED, HIL_NONFINITE_FLUX_ESTIMATE,  HIL_NONFINITE_FLUX_ESTIMATE,
-        HIL_NONFINITE_FLUX_ESTIMATE,  HIL_NONFINITE_SPEED_ESTIMATE, HIL_NONFINITE_SPEED_ESTIMATE,
-        HIL_NONFINITE_SPEED_ESTIMATE};
-    return first_nonfinite(values, quantities, 10u, value);
+        HIL_NONFINITE_FLUX_ESTIMATE,  HIL_NONFINITE_FLUX_ESTIMATE,  HIL_NONFINITE_SPEED_ESTIMATE,
+        HIL_NONFINITE_SPEED_ESTIMATE, HIL_NONFINITE_SPEED_ESTIMATE};
+    return first_nonfinite(values, quantities, 11u, value);
 }
 
 /* What the control law made of it: the torque reference and, under FOC, the voltage. */
@@ -530,7 +539,7 @@ uint8_t ctl_step(ctl *c, const hil_sample *s, hil_telemetry *tm)
     if (st->state == HIL_STATE_RUNNING) {
         /* the start-up included: never RUNNING with a NaN */
         float value = 0.0f;
-        if (nonfinite_state(c, &i, vdc_v, torque, &value) != PROT_FAULT_NONE) {
+        if (nonfinite_state(c, &i, vdc_v, mag, torque, &value) != PROT_FAULT_NONE) {
             ctl_trip(c, HIL_FAULT_NON_FINITE, value, s->period);
         }
     }
