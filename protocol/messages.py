@@ -60,6 +60,20 @@ class FaultCode(IntEnum):
     DC_LINK = 3
     WATCHDOG = 4
     PROTOCOL = 5
+    NON_FINITE = 6
+
+
+class NonFiniteQuantity(IntEnum):
+    """FAULT NON_FINITE's value: the quantity that was NaN or infinite (SPEC.md 9.6)."""
+    OTHER = 0
+    PHASE_CURRENT = 1
+    DC_LINK_VOLTAGE = 2
+    MEASURED_SPEED = 3
+    FLUX_ESTIMATE = 4
+    SPEED_ESTIMATE = 5
+    TORQUE_REFERENCE = 6
+    VOLTAGE_REFERENCE = 7
+    COMMAND = 8
 
 
 class ParamStatus(IntEnum):

@@ -16,7 +16,7 @@ from protocol.codec import (
 )
 from protocol.messages import (
     MESSAGE_CLASSES, NAME_MAX, PROTOCOL_VERSION, Command, ControllerState, FaultCode, Gates, Hello,
-    MsgType, ParamId, ParamStatus, Role, Sample, SpeedSource, Telemetry,
+    MsgType, NonFiniteQuantity, ParamId, ParamStatus, Role, Sample, SpeedSource, Telemetry,
 )
 
 HEADER = (Path(__file__).resolve().parent.parent / "protocol" / "c" / "hil_proto.h").read_text()
@@ -31,7 +31,7 @@ def _c_enum(c_name: str) -> dict[str, int]:
     ("hil_msg_type", "MSG_", MsgType), ("hil_role", "ROLE_", Role),
     ("hil_speed_source", "SPEED_", SpeedSource), ("hil_state", "STATE_", ControllerState),
     ("hil_fault_code", "FAULT_", FaultCode), ("hil_param_status", "PARAM_", ParamStatus),
-    ("hil_param_id", "PARAM_", ParamId),
+    ("hil_param_id", "PARAM_", ParamId), ("hil_nonfinite_quantity", "NONFINITE_", NonFiniteQuantity),
 ])
 def test_enums_match_the_c_header(c_name, prefix, py_enum):
     c = {k.removeprefix(prefix): v for k, v in _c_enum(c_name).items()}

@@ -3,6 +3,7 @@
 #include <string.h>
 
 #include "control.h"
+#include "fastmath.h"
 
 #define STR_(x) #x
 #define STR(x) STR_(x)
@@ -207,7 +208,14 @@ static void on_sample(hil_stub *s, const hil_sample *sample)
 
 static void on_command(hil_stub *s, const hil_command *cmd)
 {
-    if (ctl_set_command(&s->core, cmd) != 0) {
+    int refused = ctl_set_command(&s->core, cmd);
+    if (refused == -2) {
+        /* a NaN or infinite reference: stop switching and say which (SPEC.md 9.6) */
+        ctl_trip(&s->core, HIL_FAULT_NON_FINITE, (float)HIL_NONFINITE_COMMAND, s->next_period);
+        report_fault(s);
+        return;
+    }
+    if (refused != 0) {
         /* an unknown speed source is a bench bug: stop switching and say why */
         ctl_trip(&s->core, HIL_FAULT_PROTOCOL, (float)cmd->speed_source, s->next_period);
         report_fault(s);
@@ -241,7 +249,7 @@ static void emit_hello(hil_stub *s)
     m.u.hello.proto_version = HIL_PROTO_VERSION;
     m.u.hello.role = HIL_ROLE_CONTROLLER;
     m.u.hello.capabilities = HIL_CAP_GATES | HIL_CAP_DUTY | HIL_CAP_TELEMETRY | HIL_CAP_CAN;
-    m.u.hello.control_period_ns = (uint32_t)(s->core.params.control_period_s * 1e9f + 0.5f);
+    m.u.hello.control_period_ns = fm_trunc_sat_u32(s->core.params.control_period_s * 1e9f + 0.5f);
     m.u.hello.name_len = (uint8_t)name_len;
     memcpy(m.u.hello.name, stub_name, name_len);
     emit(s, &m);

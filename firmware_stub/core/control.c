@@ -132,7 +132,7 @@ void ctl_derive(ctl *c)
     k->delay_comp = p->delay_comp_periods;
     k->zero_cal_periods = p->current_zero_cal_periods;
     k->rs_id.periods_per_level = p->rs_id_periods;
-    k->rs_id.off_periods = (uint32_t)(CTL_DESIGN_RS_ID_OFF_S / t + 0.999f);
+    k->rs_id.off_periods = fm_trunc_sat_u32(CTL_DESIGN_RS_ID_OFF_S / t + 0.999f);
     k->rs_id.current_low_a = CTL_DESIGN_RS_ID_CURRENT_LOW_A;
     k->rs_id.current_high_a = CTL_DESIGN_RS_ID_CURRENT_HIGH_A;
     k->rs_id.stator_inductance_h = p->stator_inductance_h;
@@ -186,6 +186,10 @@ int ctl_set_command(ctl *c, const hil_command *cmd)
     if (cmd->speed_source > HIL_SPEED_EKF) {
         return -1;
     }
+    /* a NaN reference would reach the speed loop and the hysteresis comparators */
+    if (!isfinite(cmd->speed_ref_rad_s) || !isfinite(cmd->torque_ref_nm) || !isfinite(cmd->flux_ref_wb)) {
+        return -2;
+    }
     c->cmd.enable = (cmd->flags & HIL_CMD_ENABLE) ? 1u : 0u;
     c->cmd.torque_mode = (cmd->flags & HIL_CMD_TORQUE_MODE) ? 1u : 0u;
     c->cmd.speed_source = cmd->speed_source;
@@ -200,8 +204,12 @@ int ctl_set_command(ctl *c, const hil_command *cmd)
         st->fault_value = 0.0f;
     } else if (st->state == HIL_STATE_IDLE) {
         st->state = HIL_STATE_RUNNING;
-        /* the bridge has been off: measure the current ADCs' zero before driving it */
-        st->zero_cal_left = c->cfg.zero_cal_periods;
+        /* the bridge has been off: measure the current ADCs' zero before driving it; its
+         * length and nominal zero are latched here, so that a PARAM_SET during it (which may
+         * write 0) acts at the next enable and cannot make the mean divide by zero */
+        st->zero_cal_periods = c->cfg.zero_cal_periods;
+        st->zero_cal_nominal_counts = c->params.current_offset_counts;
+        st->zero_cal_left = st->zero_cal_periods;
         st->zero_cal_sum1 = 0.0f;
         st->zero_cal_sum2 = 0.0f;
         /* then, once, the stator resistance (rs_id.h): only with the rotor at standstill */
@@ -329,6 +337,75 @@ static uint8_t predict_one_period(const ctl *c, const clarke_out *i, float vdc_v
 
 static float clamp_abs(float v, float lim) { return v > lim ? lim : (v < -lim ? -lim : v); }
 
+/* ---- non-finite quantities: FAULT NON_FINITE (SPEC.md 9.6) ----
+ * A NaN compares false with everything, so a NaN current would pass every limit and a NaN
+ * estimate would drive the switching table: any NaN or infinity in what the drive measures,
+ * estimates or commands stops it. Each check sums its quantities first (one test in the
+ * common case: a NaN or an infinity in any term makes the sum NaN or infinite) and names the
+ * first offending one, in signal-path order (a NaN current makes the flux NaN too: the
+ * current is named), only when the sum is not finite. */
+
+/* The first non-finite of n values as PROT_FAULT_NONE or HIL_FAULT_NON_FINITE with the
+ * hil_nonfinite_quantity in *value (none: finite values whose sum overflowed). */
+#if defined(__GNUC__)
+__attribute__((noinline, cold))
+#endif
+static uint8_t first_nonfinite(const float *values, const uint8_t *quantities, size_t n, float *value)
+{
+    for (size_t k = 0; k < n; ++k) {
+        if (!isfinite(values[k])) {
+            *value = (float)quantities[k];
+            return HIL_FAULT_NON_FINITE;
+        }
+    }
+    return PROT_FAULT_NONE;
+}
+
+/* Everything the running drive acts on: the measurements, the encoder speed, the flux
+ * observer's flux, its magnitude (which overflows before its components do) and the torque,
+ * the conventional and the EKF speed and the EKF angle. */
+static uint8_t nonfinite_state(const ctl *c, const clarke_out *i, float vdc_v, float flux_mag_wb, float torque_nm,
+                               float *value)
+{
+    const ctl_state *st = &c->st;
+    float sum = i->i_alpha_a + i->i_beta_a + vdc_v + st->enc.speed_rad_s + st->flux.psi_alpha_wb +
+                st->flux.psi_beta_wb + flux_mag_wb + torque_nm + st->conv.speed_lpf_rad_s + st->ekf.speed_rad_s +
+                st->ekf.theta_filtered_rad;
+    if (isfinite(sum)) {
+        return PROT_FAULT_NONE;
+    }
+    const float values[11] = {i->i_alpha_a,
+                              i->i_beta_a,
+                              vdc_v,
+                              st->enc.speed_rad_s,
+                              st->flux.psi_alpha_wb,
+                              st->flux.psi_beta_wb,
+                              flux_mag_wb,
+                              torque_nm,
+                              st->conv.speed_lpf_rad_s,
+                              st->ekf.speed_rad_s,
+                              st->ekf.theta_filtered_rad};
+    static const uint8_t quantities[11] = {
+        HIL_NONFINITE_PHASE_CURRENT,  HIL_NONFINITE_PHASE_CURRENT,  HIL_NONFINITE_DC_LINK_VOLTAGE,
+        HIL_NONFINITE_MEASURED_SPEED, HIL_NONFINITE_FLUX_ESTIMATE,  HIL_NONFINITE_FLUX_ESTIMATE,
+        HIL_NONFINITE_FLUX_ESTIMATE,  HIL_NONFINITE_FLUX_ESTIMATE,  HIL_NONFINITE_SPEED_ESTIMATE,
+        HIL_NONFINITE_SPEED_ESTIMATE, HIL_NONFINITE_SPEED_ESTIMATE};
+    return first_nonfinite(values, quantities, 11u, value);
+}
+
+/* What the control law made of it: the torque reference and, under FOC, the voltage. */
+static uint8_t nonfinite_output(const ctl *c, float torque_ref_nm, float *value)
+{
+    const ctl_state *st = &c->st;
+    float u_sum = st->answer_duty ? st->foc.u_alpha_v + st->foc.u_beta_v : 0.0f;
+    if (isfinite(torque_ref_nm + u_sum)) {
+        return PROT_FAULT_NONE;
+    }
+    const float values[2] = {torque_ref_nm, u_sum};
+    static const uint8_t quantities[2] = {HIL_NONFINITE_TORQUE_REFERENCE, HIL_NONFINITE_VOLTAGE_REFERENCE};
+    return first_nonfinite(values, quantities, 2u, value);
+}
+
 enum { CTL_STARTUP_DONE = 0, CTL_STARTUP_ZERO_CAL = 1, CTL_STARTUP_RS_ID = 2 };
 
 /* What the start-up does this period, after an enable, in this order:
@@ -345,11 +422,12 @@ static uint8_t startup_phase(ctl *c, const hil_sample *s)
 {
     ctl_state *st = &c->st;
     if (st->zero_cal_left > 0u) {
-        float nominal = c->params.current_offset_counts;
+        float nominal = st->zero_cal_nominal_counts;
         st->zero_cal_sum1 += (float)s->adc_i1 - nominal;
         st->zero_cal_sum2 += (float)s->adc_i2 - nominal;
         if (--st->zero_cal_left == 0u) {
-            float n = (float)c->cfg.zero_cal_periods;
+            /* zero_cal_left counted down from zero_cal_periods: n >= 1 */
+            float n = (float)st->zero_cal_periods;
             c->cfg.clarke.offset1_counts = nominal + st->zero_cal_sum1 / n;
             c->cfg.clarke.offset2_counts = nominal + st->zero_cal_sum2 / n;
         }
@@ -387,6 +465,10 @@ static void identify_resistance(ctl *c, const clarke_out *i, float vdc_v, const 
     float vdc = vdc_v > 1.0f ? vdc_v : 1.0f;
     float u_d, u_q;
     if (rsid_step(&c->cfg.rs_id, &st->rs_id, i_d, i_q, vdc * FM_INV_SQRT3, &u_d, &u_q)) {
+        if (!isfinite(u_d + u_q)) {
+            ctl_trip(c, HIL_FAULT_NON_FINITE, (float)HIL_NONFINITE_VOLTAGE_REFERENCE, s->period);
+            return;
+        }
         float duty[3];
         svpwm_duties(co * u_d - sn * u_q, sn * u_d + co * u_q, vdc, duty);
         st->duty[0] = svpwm_duty_u16(duty[0]);
@@ -461,6 +543,13 @@ uint8_t ctl_step(ctl *c, const hil_sample *s, hil_telemetry *tm)
     uint8_t sector = 0u;
     float torque_ref = 0.0f;
     st->answer_duty = 0u;
+    if (st->state == HIL_STATE_RUNNING) {
+        /* the start-up included: never RUNNING with a NaN */
+        float value = 0.0f;
+        if (nonfinite_state(c, &i, vdc_v, mag, torque, &value) != PROT_FAULT_NONE) {
+            ctl_trip(c, HIL_FAULT_NON_FINITE, value, s->period);
+        }
+    }
     if (st->state == HIL_STATE_RUNNING && !calibrating) {
         float value = 0.0f;
         uint8_t fault = prot_hardware(&k->prot, i.i_peak_a, vdc_v, s->status, &value);
@@ -488,8 +577,13 @@ uint8_t ctl_step(ctl *c, const hil_sample *s, hil_telemetry *tm)
                 uint8_t torque_up = hyst_step(&k->torque_hyst, &st->torque_hyst, torque_ref, torque_c);
                 vector = k->vector_of[sector][(flux_up ? 0u : 2u) + (torque_up ? 0u : 1u)]; /* Table 3 */
             }
+            if (nonfinite_output(c, torque_ref, &value) != PROT_FAULT_NONE) {
+                ctl_trip(c, HIL_FAULT_NON_FINITE, value, s->period);
+                vector = 0u; /* every switch off, in this answer already */
+                st->answer_duty = 0u;
+            }
         }
-    } else if (calibrating == CTL_STARTUP_RS_ID) {
+    } else if (calibrating == CTL_STARTUP_RS_ID && st->state == HIL_STATE_RUNNING) {
         identify_resistance(c, &i, vdc_v, s);
     }
     st->vector_prev3 = st->vector_prev2;
@@ -604,14 +698,19 @@ static void write_field(ctl_params *p, const param_desc *d, float value)
 {
     unsigned char *base = (unsigned char *)p + d->offset;
     switch (d->type) {
-    case PT_U8:
-        *(uint8_t *)base = (uint8_t)value;
+    /* value is in the table's range; saturated all the same, should a row's range exceed its type */
+    case PT_U8: {
+        uint32_t v = fm_trunc_sat_u32(value);
+        *(uint8_t *)base = (uint8_t)(v < UINT8_MAX ? v : UINT8_MAX);
         break;
-    case PT_U16:
-        *(uint16_t *)(void *)base = (uint16_t)value;
+    }
+    case PT_U16: {
+        uint32_t v = fm_trunc_sat_u32(value);
+        *(uint16_t *)(void *)base = (uint16_t)(v < UINT16_MAX ? v : UINT16_MAX);
         break;
+    }
     case PT_U32:
-        *(uint32_t *)(void *)base = (uint32_t)value;
+        *(uint32_t *)(void *)base = fm_trunc_sat_u32(value);
         break;
     default:
         *(float *)(void *)base = value;
@@ -647,7 +746,7 @@ uint8_t ctl_param_set(ctl *c, uint16_t id, float value, float *value_now)
     /* written so that NaN fails every comparison and is refused */
     int in_range = value >= d->min && value <= d->max;
     if (in_range && d->integer) {
-        in_range = (float)(int32_t)value == value;
+        in_range = truncf(value) == value; /* no conversion: value is finite and in range here */
     }
     if (!in_range) {
         return HIL_PARAM_OUT_OF_RANGE;

@@ -138,6 +138,8 @@ typedef struct {
     uint8_t state;      /* hil_state */
     uint8_t startup;        /* 1 after an enable until the zero calibration and the R identification are done */
     uint32_t zero_cal_left; /* periods of the start-up zero calibration still to run */
+    uint32_t zero_cal_periods; /* its length, latched at the enable: a PARAM_SET during it acts at the next enable */
+    float zero_cal_nominal_counts; /* the nominal zero the sums are taken from, latched with it */
     float zero_cal_sum1;    /* sums of adc_i1, adc_i2 minus the nominal zero over them */
     float zero_cal_sum2;
     rsid_state rs_id; /* the stator-resistance identification: runs once, after the zero calibration of the first enable */
@@ -163,7 +165,8 @@ void ctl_derive(ctl *c);
 
 /* Applies a COMMAND. Enabling from IDLE starts switching at the next step;
  * clearing ENABLE stops switching and clears a latched fault. Returns 0, or -1
- * (command ignored) for an unknown speed source. */
+ * (command ignored) for an unknown speed source, or -2 (command ignored) for a
+ * NaN or infinite reference (the caller trips NON_FINITE, HIL_NONFINITE_COMMAND). */
 int ctl_set_command(ctl *c, const hil_command *cmd);
 
 /* Latches a fault: switches off from now on, state FAULT until disabled. */
@@ -174,7 +177,10 @@ void ctl_trip(ctl *c, uint8_t fault_code, float value, uint32_t period);
  * the drive controls (ready), else st.state. */
 uint8_t ctl_reported_state(const ctl *c);
 
-/* One control period. Returns the gates to apply until the next SAMPLE, or,
+/* One control period. While running, any current, voltage, speed, estimate or
+ * reference that is NaN or infinite trips FAULT NON_FINITE (value: the
+ * hil_nonfinite_quantity) and the gates go off in this same answer.
+ * Returns the gates to apply until the next SAMPLE, or,
  * when it leaves c->st.answer_duty at 1 (FOC while running), the duties in
  * c->st.duty are the answer instead (the return value is then 0). With
  * tm not NULL, also fills every telemetry field, including the telemetry-only

@@ -31,7 +31,8 @@
 void fm_sincos(float theta_rad, float *sin_out, float *cos_out)
 {
     float qf = theta_rad * FM_TWO_OVER_PI;
-    int32_t q = (int32_t)(qf + (qf >= 0.0f ? 0.5f : -0.5f));
+    /* saturated: a NaN or infinite angle gives a NaN sine and cosine, not undefined behaviour */
+    int32_t q = fm_trunc_sat_i32(qf + (qf >= 0.0f ? 0.5f : -0.5f));
     float r = (theta_rad - (float)q * FM_PIO2_HI) - (float)q * FM_PIO2_LO;
     float r2 = r * r;
     float s = r + r * r2 * (FM_S1 + r2 * (FM_S2 + r2 * FM_S3));
@@ -81,6 +82,6 @@ float fm_asin(float x)
 float fm_wrap_pi_slow(float theta_rad)
 {
     float turns = theta_rad * (1.0f / FM_TWO_PI);
-    int32_t k = (int32_t)(turns + (turns >= 0.0f ? 0.5f : -0.5f));
+    int32_t k = fm_trunc_sat_i32(turns + (turns >= 0.0f ? 0.5f : -0.5f));
     return theta_rad - (float)k * FM_TWO_PI;
 }

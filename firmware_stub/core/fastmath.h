@@ -67,6 +67,32 @@ static inline float fm_atan2(float y, float x)
     return y < 0.0f ? -a : a;
 }
 
+/* Float to integer as a C cast (truncation towards zero) where the cast is defined, saturated
+ * where it is not (C99 6.3.1.4: undefined out of range): +-inf and values beyond the type's
+ * range give its limits, NaN gives 0. The callers' NaN becomes a NaN result or a fault
+ * downstream (control.c); only the conversion itself must never be undefined. */
+static inline int32_t fm_trunc_sat_i32(float x)
+{
+    if (x >= 2147483648.0f) {
+        return INT32_MAX;
+    }
+    if (x >= -2147483648.0f) {
+        return (int32_t)x;
+    }
+    return x < 0.0f ? INT32_MIN : 0; /* below the range, or NaN */
+}
+
+static inline uint32_t fm_trunc_sat_u32(float x)
+{
+    if (x >= 4294967296.0f) {
+        return UINT32_MAX;
+    }
+    if (x >= 0.0f) {
+        return (uint32_t)x;
+    }
+    return 0u; /* negative, or NaN */
+}
+
 /* theta wrapped to [-pi, pi]; exact for |theta| < 2^20 rad. Inline: most
  * calls are already in range or one turn out. */
 static inline float fm_wrap_pi(float theta_rad)

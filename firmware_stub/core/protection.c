@@ -2,10 +2,13 @@
 
 #include <math.h>
 
+#include "fastmath.h"
+
 void prot_derive(prot_cfg *cfg)
 {
     float n = cfg->encoder_loss_timeout_s / cfg->control_period_s;
-    cfg->encoder_loss_timeout_periods = n < 4e9f ? (uint32_t)(n + 0.5f) : 4000000000u;
+    /* a NaN timeout gives 0 periods: the shortest, so that it trips rather than never */
+    cfg->encoder_loss_timeout_periods = n >= 4e9f ? 4000000000u : fm_trunc_sat_u32(n + 0.5f);
 }
 
 void prot_reset(prot_state *st, uint16_t count)
@@ -16,7 +19,8 @@ void prot_reset(prot_state *st, uint16_t count)
 
 uint8_t prot_hardware(const prot_cfg *cfg, float i_peak_a, float vdc_v, uint8_t status_bits, float *value)
 {
-    if (i_peak_a > cfg->overcurrent_a || (status_bits & (PROT_STATUS_OVERCURRENT | PROT_STATUS_GATE_FAULT))) {
+    /* written so that a NaN current trips it */
+    if (!(i_peak_a <= cfg->overcurrent_a) || (status_bits & (PROT_STATUS_OVERCURRENT | PROT_STATUS_GATE_FAULT))) {
         *value = i_peak_a;
         return PROT_FAULT_OVERCURRENT;
     }

@@ -4,7 +4,7 @@
 
 void enc_derive(enc_cfg *cfg)
 {
-    int32_t cpr = (int32_t)(cfg->counts_per_rev + 0.5f);
+    int32_t cpr = fm_trunc_sat_i32(cfg->counts_per_rev + 0.5f);
     cfg->counts_per_rev_int = cpr > 0 ? cpr : 1;
     cfg->rad_per_count = FM_TWO_PI / (float)cfg->counts_per_rev_int;
     cfg->speed_rad_s_per_count = cfg->rad_per_count / ((float)ENC_WINDOW_PERIODS * cfg->control_period_s);

@@ -120,6 +120,47 @@ static void wrap_into_range(void **state)
     }
 }
 
+/* The saturating conversions: a C cast where it is defined, the type's limits beyond it, 0
+ * for NaN (under -fsanitize=float-cast-overflow a plain cast of these stops the test). */
+static void float_to_int_saturates(void **state)
+{
+    (void)state;
+    assert_int_equal(fm_trunc_sat_i32(2.9f), 2);
+    assert_int_equal(fm_trunc_sat_i32(-2.9f), -2);
+    assert_int_equal(fm_trunc_sat_i32(2147483520.0f), 2147483520); /* the largest float below 2^31 */
+    assert_int_equal(fm_trunc_sat_i32(2147483648.0f), INT32_MAX);
+    assert_int_equal(fm_trunc_sat_i32(-2147483648.0f), INT32_MIN); /* exactly representable */
+    assert_int_equal(fm_trunc_sat_i32(-3e9f), INT32_MIN);
+    assert_int_equal(fm_trunc_sat_i32(INFINITY), INT32_MAX);
+    assert_int_equal(fm_trunc_sat_i32(-INFINITY), INT32_MIN);
+    assert_int_equal(fm_trunc_sat_i32(NAN), 0);
+    assert_int_equal(fm_trunc_sat_u32(4294967040.0f), 4294967040u); /* the largest float below 2^32 */
+    assert_int_equal(fm_trunc_sat_u32(4294967296.0f), UINT32_MAX);
+    assert_int_equal(fm_trunc_sat_u32(INFINITY), UINT32_MAX);
+    assert_int_equal(fm_trunc_sat_u32(-0.5f), 0u);
+    assert_int_equal(fm_trunc_sat_u32(-INFINITY), 0u);
+    assert_int_equal(fm_trunc_sat_u32(NAN), 0u);
+}
+
+/* A NaN or infinite angle gives a non-finite result, not undefined behaviour: the caller's
+ * check (control.c) sees it. */
+static void nonfinite_angles_give_nan(void **state)
+{
+    (void)state;
+    const float bad[] = {NAN, INFINITY, -INFINITY};
+    for (int k = 0; k < 3; ++k) {
+        float s = 0.0f, c = 0.0f;
+        fm_sincos(bad[k], &s, &c);
+        assert_false(isfinite(s) && isfinite(c));
+        assert_false(isfinite(fm_wrap_pi(bad[k])));
+        assert_false(isfinite(fm_sin(bad[k])));
+    }
+    /* finite but far outside the documented range: saturated, so defined, and finite */
+    float s = 0.0f, c = 0.0f;
+    fm_sincos(1e30f, &s, &c);
+    assert_true(isfinite(fm_wrap_pi_slow(1e30f)));
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -130,6 +171,8 @@ int main(void)
         cmocka_unit_test(sin_error_bound),
         cmocka_unit_test(asin_error_bound),
         cmocka_unit_test(wrap_into_range),
+        cmocka_unit_test(float_to_int_saturates),
+        cmocka_unit_test(nonfinite_angles_give_nan),
     };
     return cmocka_run_group_tests_name("fastmath", tests, NULL, NULL);
 }

@@ -26,8 +26,8 @@ from configfile.dataclass_methods import dataclass
 from plant_rt import Plant, TRUTH_FIELDS
 from protocol.messages import (
     CAP_DUTY, CAP_DUTY_LEGS, CAP_GATES, LEGS_ALL, PROTOCOL_VERSION, Command, Fault, FaultCode, Gates,
-    Duty, DutyLegs, Hello, ParamGet, ParamId, ParamSet, ParamValue, Role, Sample, Shutdown,
-    SpeedSource, Status, Telemetry,
+    Duty, DutyLegs, Hello, NonFiniteQuantity, ParamGet, ParamId, ParamSet, ParamValue, Role, Sample,
+    Shutdown, SpeedSource, Status, Telemetry,
 )
 
 from hil.links.registry import BoardConnection, connect
@@ -959,8 +959,17 @@ def _fault_text(msg: Fault, period_s: float) -> str:
     except ValueError:
         name = "UNKNOWN"
     unit = _FAULT_UNITS.get(msg.code, "")
+    if msg.code == FaultCode.NON_FINITE:
+        unit = f"({_nonfinite_name(msg.value)})"  # the value codes the quantity (SPEC.md 9.6)
     return (f"period {msg.period} (t = {msg.period * period_s:.6g} s): board FAULT {msg.code} "
             f"{name}, value {msg.value:.4g}{' ' + unit if unit else ''}")
+
+
+def _nonfinite_name(value: float) -> str:
+    try:
+        return NonFiniteQuantity(int(value)).name if float(value).is_integer() else "unknown quantity"
+    except ValueError:
+        return "unknown quantity"
 
 
 def _name(hello: Hello) -> str:
