@@ -101,8 +101,8 @@ def run_realtime(session, count: int, stop: Callable[[], bool] | None = None,
                 if t is Gates or t is Duty:
                     if msg.period > answered_period:
                         answered_period = msg.period
-                        if t is Gates:
-                            latest_gates, latest_duty = msg.gates, None
+                        if t is Gates:      # (bits 6-7 reserved: ignored, SPEC 4)
+                            latest_gates, latest_duty = msg.gates & 0x3F, None
                         else:
                             d = msg.duty
                             latest_gates, latest_duty = None, (d[0] / 65535.0, d[1] / 65535.0,
