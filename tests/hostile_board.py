@@ -101,7 +101,7 @@ class BoardPlan:
     capabilities: int
     weights: dict[str, float]
     end_after: int | None       # SAMPLEs answered before the end below (None: never)
-    end: str                    # close | silence | flood
+    end: str                    # close | silence | flood | stream (HEARTBEATs unasked, always)
 
     @classmethod
     def draw(cls, seed: int) -> "BoardPlan":
@@ -119,7 +119,7 @@ class BoardPlan:
         weights["answer"] = 8.0 + rng.random() * 12.0
         weights["silence"] *= 0.3
         end_after = rng.randrange(0, 400) if rng.random() < 0.3 else None
-        end = rng.choice(("close", "silence", "flood"))
+        end = rng.choice(("close", "silence", "flood", "stream"))
         return cls(seed, hello, params, rng.randrange(9), kind, caps, weights, end_after, end)
 
 
@@ -138,6 +138,7 @@ class HostileBoard:
         self.samples = 0
         self.last_answer: dict[int, object] = {}
         self.ended = False
+        self.streaming = False      # sends HEARTBEAT bursts unasked, as fast as it can
         self.heartbeat = 0
         self._actions = [a for a, w in self.plan.weights.items() if w > 0]
         self._weights = [self.plan.weights[a] for a in self._actions]
@@ -272,6 +273,9 @@ class HostileBoard:
             if plan.end == "close":
                 self.ended = True
                 return ["close"]
+            if plan.end == "stream":
+                self.streaming = True
+                return []
             if plan.end == "flood":
                 self.heartbeat += 100
                 return [Heartbeat((self.heartbeat + i) & 0xFFFFFFFF) for i in range(100)]
@@ -281,6 +285,10 @@ class HostileBoard:
             out += self._act(action, k)
         rng.shuffle(out)
         return out
+
+    def next_heartbeat(self) -> int:
+        self.heartbeat = (self.heartbeat + 1) & 0xFFFFFFFF
+        return self.heartbeat
 
     def react(self, msg) -> list:
         if self.ended:
@@ -367,8 +375,16 @@ def serve_serial(board: HostileBoard, fd_in: int, fd_out: int, stop: threading.E
             view = view[n:]
 
     while not stop.is_set():
+        if board.streaming:
+            try:
+                os.write(fd_out, b"".join(enc.encode(Heartbeat(board.next_heartbeat()))
+                                          for _ in range(20)))
+            except BlockingIOError:
+                pass                    # the bench reads no more than it reads
+            except OSError:
+                return
         try:
-            ready, _, _ = select.select([fd_in], [], [], 0.05)
+            ready, _, _ = select.select([fd_in], [], [], 0.001 if board.streaming else 0.05)
         except (OSError, ValueError):
             return
         if not ready:
@@ -531,7 +547,10 @@ class CanBoard:
         board, rng = self.board, self.board.rng
         try:
             while not self._stop.is_set():
-                frame = self._bus.recv(0.05)
+                if board.streaming:
+                    self._send([f for _ in range(20) for f in
+                                self._message(Heartbeat(board.next_heartbeat()))])
+                frame = self._bus.recv(0.001 if board.streaming else 0.05)
                 if frame is None:
                     continue
                 got = self._rx.feed(frame.arbitration_id, frame.data)
