@@ -192,3 +192,25 @@ def test_gates_reserved_bits_are_ignored_in_real_time(tmp_path):
     assert session.error is None
     driven = {g for g, _ in steps if g is not None}
     assert driven == {0x29}, steps
+
+
+def test_future_period_answer_does_not_blind_the_real_time_watchdog(tmp_path):
+    """Real time: an answer for a period not sent yet (here 2^32 - 1) is not an answer. The
+    loop took it as the newest answer, so every later answer counted as late, no period as
+    missing, and the watchdog never tripped while the plant held the bogus gates: a board
+    that then fell silent was never stopped."""
+    def on_sample(sample, enc):
+        if sample.period == 0:
+            return enc.encode(Gates(period=0xFFFFFFFF, gates=0x29))
+        return b""                                          # then silence
+    with FakeBoard(on_sample=on_sample) as board:
+        session = BenchSession(load_profile(), SessionConfig(
+            link=board.url, mode="realtime", realtime_period_s=0.005, policy=POLICY,
+            watchdog_periods=5, watchdog_s=60.0, hold_cpu_latency=False))
+        with pytest.raises(SessionError, match="watchdog"):
+            with session:
+                steps = _record_steps(session.plant)
+                session.run_periods(100)
+    assert session.plant.period < 100
+    assert {g for g, _ in steps} == {None}              # the bogus answer never drove the plant
+    assert session.plant._cmd is GATE_COMMANDS[0]

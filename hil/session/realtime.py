@@ -99,7 +99,8 @@ def run_realtime(session, count: int, stop: Callable[[], bool] | None = None,
             while msg is not None:
                 t = type(msg)
                 if t is Gates or t is Duty:
-                    if msg.period > answered_period:
+                    # an answer to a SAMPLE sent (period < plant.period); a future one is not
+                    if answered_period < msg.period < plant.period:
                         answered_period = msg.period
                         if t is Gates:      # (bits 6-7 reserved: ignored, SPEC 4)
                             latest_gates, latest_duty = msg.gates & 0x3F, None
