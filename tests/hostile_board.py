@@ -21,7 +21,8 @@ Where the board sits (``transport``):
 - ``exec``: this file run as a program on the pty the bench's ``exec:`` link makes
   (``exec:PYTHON?args=tests/hostile_board.py --seed N``), the board as its own process.
 
-    python tests/hostile_board.py --seed 7        # a board on stdin/stdout (for exec:)
+    python tests/hostile_board.py --seed 7                  # a board on stdin/stdout (exec:)
+    python tests/hostile_board.py --seed 7 --session can    # one session against it (replay)
 """
 from __future__ import annotations
 
@@ -318,10 +319,15 @@ def _raw_frame(version: int, msg_type: int, seq: int, payload: bytes, length: in
     return cobs_encode(raw + struct.pack("<H", crc)) + b"\x00"
 
 
-def serial_damage(rng: random.Random, encoder: FrameEncoder, k: int) -> bytes:
-    """One damaged stretch of serial bytes (SPEC 3.4's every check failing in turn)."""
+SERIAL_DAMAGE_KINDS = 12
+
+
+def serial_damage(rng: random.Random, encoder: FrameEncoder, k: int,
+                  kind: int | None = None) -> bytes:
+    """One damaged stretch of serial bytes (SPEC 3.4's every check failing in turn); kind
+    0..SERIAL_DAMAGE_KINDS-1 picks one (default: drawn)."""
     seq = rng.randrange(256)
-    kind = rng.randrange(12)
+    kind = rng.randrange(SERIAL_DAMAGE_KINDS) if kind is None else kind
     if kind == 0:       # bad CRC
         return _raw_frame(1, 3, seq, struct.pack("<IB", k, 0), crc_ok=False)
     if kind == 1:       # bad COBS: a code byte whose run passes the delimiter
@@ -665,8 +671,10 @@ class SessionResult:
         return None
 
     def describe(self) -> str:
-        return (f"{self.transport} session seed {self.seed} (HostileBoard({self.seed})): "
-                f"{self.problem or self.outcome}; error: {self.error}; plan: {self.plan}")
+        return (f"{self.transport} session seed {self.seed} (replay: python "
+                f"tests/hostile_board.py --seed {self.seed} --session {self.transport} "
+                f"--periods {self.periods_asked}): {self.problem or self.outcome}; "
+                f"error: {self.error}; plan: {self.plan}")
 
 
 def policy_bound_s(policy, periods: int, parameters: int, answer_wait_s: float) -> float:
@@ -718,6 +726,7 @@ def run_session(transport: str, seed: int, log_path: Path, periods: int = 200,
     """One bench session against the hostile board of ``seed``: its outcome and the checks
     (safe state, readable log, bounded length). The session runs in a worker thread; if it
     outlives ``guard_s`` (default: twice its own bound, plus 10 s) it counts as a hang."""
+    from hil.logs.commands import format_info, log_export, log_info
     from hil.logs.reader import read_log
     from hil.session.bench_session import BenchSession, SessionConfig
     from hil.session.board_params import board_parameters
@@ -781,6 +790,10 @@ def run_session(transport: str, seed: int, log_path: Path, periods: int = 200,
         data = read_log(log_path)
         if not data.complete:
             raise ValueError(f"log not complete: {data.note}")
+        # and what `hil log info` and `hil log export` make of it
+        format_info(log_info(log_path))
+        log_export(log_path, sorted(data), Path(log_path).with_suffix(".csv"))
+        Path(log_path).with_suffix(".csv").unlink()
         result.log_readable = True
     except Exception as exc:  # noqa: BLE001 - any failure to read is the finding
         result.log_error = f"{type(exc).__name__}: {exc}"
@@ -850,12 +863,23 @@ def figures_of(results: list[SessionResult], base_seed: int, periods: int) -> di
 
 
 def main(argv: list[str] | None = None) -> int:
-    """The board as a program on stdin/stdout (a serial line), for the bench's exec: link."""
+    """The board as a program on stdin/stdout (a serial line), for the bench's exec: link;
+    with --session, one bench session against it (a failure's replay)."""
     import argparse
+    import tempfile
 
     parser = argparse.ArgumentParser(description="a seeded hostile board on stdin/stdout")
     parser.add_argument("--seed", type=int, required=True)
+    parser.add_argument("--session", choices=TRANSPORTS,
+                        help="play one bench session against the board on this transport")
+    parser.add_argument("--periods", type=int, default=200)
     args = parser.parse_args(argv)
+    if args.session:
+        with tempfile.TemporaryDirectory() as directory:
+            r = run_session(args.session, args.seed, Path(directory) / "session.mcap",
+                            args.periods)
+        print(r.describe())
+        return 1 if r.problem else 0
     os.set_blocking(1, False)
     serve_serial(HostileBoard(args.seed), 0, 1, threading.Event())
     return 0

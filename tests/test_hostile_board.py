@@ -214,3 +214,46 @@ def test_future_period_answer_does_not_blind_the_real_time_watchdog(tmp_path):
     assert session.plant.period < 100
     assert {g for g, _ in steps} == {None}              # the bogus answer never drove the plant
     assert session.plant._cmd is GATE_COMMANDS[0]
+
+
+# ------------------------------------------------------------------ the hostile board itself
+
+from protocol.codec import FrameEncoder, StreamDecoder  # noqa: E402
+from tests.hostile_board import (  # noqa: E402
+    SERIAL_DAMAGE_KINDS, HostileBoard, serial_damage, session_seed,
+)
+from protocol.messages import Hello, ParamSet, Sample  # noqa: E402
+
+
+@pytest.mark.parametrize("kind", range(SERIAL_DAMAGE_KINDS))
+def test_serial_damage_is_never_a_message(kind):
+    """Each kind of damage the board sends is refused by the bench's decoder: no message from
+    it, at least one error counted (a partial frame costs the good frame after it), whatever
+    the draw."""
+    for draw in range(50):
+        rng = random.Random(draw)
+        dec = StreamDecoder()
+        good = FrameEncoder().encode(Gates(period=7, gates=0x29))
+        msgs = dec.feed(b"\x00" + serial_damage(rng, FrameEncoder(), 7, kind) + good)
+        errors = sum(v for k, v in dec.counters.items() if k not in ("frames_ok", "seq_gaps"))
+        if kind == 10:                      # delimiters only: empty frames, nothing counted
+            assert msgs == [Gates(period=7, gates=0x29)] and errors == 0
+        else:
+            assert errors >= 1, (kind, draw, dec.counters)
+            assert msgs in ([], [Gates(period=7, gates=0x29)]), (kind, draw, msgs)
+
+
+def test_hostile_board_is_its_seed():
+    """The same seed, the same board: its plan and its reactions to the same traffic; another
+    seed, another board."""
+    traffic = [Hello(1, 0, 0, 50000, 9, b"hil-bench"), ParamSet(1, 5e-5)] + \
+        [Sample(k, 1, 2, 3, 4, 0) for k in range(200)]
+
+    def play(seed):
+        board = HostileBoard(seed)
+        return board.plan, [board.react(m) for m in traffic]
+
+    seeds = [session_seed(HOSTILE_BASE_SEED, i) for i in range(3)]
+    assert len(set(seeds)) == 3
+    assert repr(play(seeds[0])) == repr(play(seeds[0]))
+    assert repr(play(seeds[0])) != repr(play(seeds[1]))
