@@ -722,10 +722,12 @@ class _ExecBoard:
 
 
 def run_session(transport: str, seed: int, log_path: Path, periods: int = 200,
-                guard_s: float | None = None, policy=None) -> SessionResult:
+                guard_s: float | None = None, policy=None,
+                realtime_period_s: float | None = None) -> SessionResult:
     """One bench session against the hostile board of ``seed``: its outcome and the checks
     (safe state, readable log, bounded length). The session runs in a worker thread; if it
-    outlives ``guard_s`` (default: twice its own bound, plus 10 s) it counts as a hang."""
+    outlives ``guard_s`` (default: twice its own bound, plus 10 s) it counts as a hang.
+    realtime_period_s: a real-time session at that period instead of lockstep."""
     from hil.logs.commands import format_info, log_export, log_info
     from hil.logs.reader import read_log
     from hil.session.bench_session import BenchSession, SessionConfig
@@ -750,7 +752,9 @@ def run_session(transport: str, seed: int, log_path: Path, periods: int = 200,
                 result.plan = _plan_summary(board.board.plan)
                 session = BenchSession(profile, SessionConfig(
                     link=board.url, log_path=log_path, seed=seed, policy=policy,
-                    hold_cpu_latency=False))
+                    hold_cpu_latency=False,
+                    mode="lockstep" if realtime_period_s is None else "realtime",
+                    realtime_period_s=realtime_period_s))
                 box["session"] = session
                 try:
                     with session:
@@ -812,12 +816,13 @@ TRANSPORT_CYCLE = ("pty", "can") * 12 + ("exec",)
 
 
 def run_many(count: int, base_seed: int, directory: Path, transports=TRANSPORT_CYCLE,
-             periods: int = 200, on_result=None, stop=None,
-             workers: int = 3) -> tuple[dict, list[SessionResult]]:
+             periods: int = 200, on_result=None, stop=None, workers: int = 3,
+             realtime_period_s: float | None = None) -> tuple[dict, list[SessionResult]]:
     """``count`` sessions (fewer if ``stop()`` says so before one starts), session i on
     transports[i % len] seeded session_seed(base, i), ``workers`` at a time (a session spends
     most of its time waiting on its board: a few overlap on two cores); returns the figures
-    and the sessions that went wrong, in session order."""
+    and the sessions that went wrong, in session order. realtime_period_s: real-time
+    sessions at that period instead of lockstep."""
     from concurrent.futures import ThreadPoolExecutor
 
     def one(i: int) -> SessionResult | None:
@@ -826,7 +831,7 @@ def run_many(count: int, base_seed: int, directory: Path, transports=TRANSPORT_C
         transport = transports[i % len(transports)]
         seed = session_seed(base_seed, i)
         log = Path(directory) / f"{transport}-{i}-{seed}.mcap"
-        r = run_session(transport, seed, log, periods)
+        r = run_session(transport, seed, log, periods, realtime_period_s=realtime_period_s)
         if r.outcome != "hang":
             log.unlink(missing_ok=True)
         if on_result is not None:
