@@ -407,7 +407,7 @@ class BenchSession:
         clamped = _f32(answer.value) != requested
         if clamped and pid == int(ParamId.CONTROL_PERIOD_S):
             raise SessionError(f"{where} was built for a control period of "
-                               f"{round(answer.value * 1e9)} ns, the bench runs "
+                               f"{_ns_text(answer.value)}, the bench runs "
                                f"{round(self.period_s * 1e9)} ns (CONTROL_PERIOD_S {value:g} "
                                f"answered {answer.value:g})")
         readback = self._param_exchange(ParamGet(id=int(pid)), int(pid),
@@ -668,7 +668,7 @@ class BenchSession:
                         t = type(msg)
                         if t is Gates:
                             if msg.period == k:
-                                gates = msg.gates
+                                gates = msg.gates & 0x3F    # bits 6-7 reserved: ignored (SPEC 4)
                                 break
                             self.stale_answers += 1
                             self._last_stale = ("GATES", msg.period)
@@ -948,6 +948,11 @@ def _policy(profile, config: SessionConfig) -> SessionPolicy:
 
 def _f32(value: float) -> bytes:
     return struct.pack("<f", value)
+
+
+def _ns_text(period_s: float) -> str:
+    """A board's control period in ns for a message; a NaN or infinite one as it came."""
+    return f"{round(period_s * 1e9)} ns" if math.isfinite(period_s) else f"{period_s} s"
 
 
 _FAULT_UNITS = {1: "A", 2: "s", 3: "V", 4: "s"}

@@ -99,10 +99,11 @@ def run_realtime(session, count: int, stop: Callable[[], bool] | None = None,
             while msg is not None:
                 t = type(msg)
                 if t is Gates or t is Duty or t is DutyLegs:
-                    if msg.period > answered_period:
+                    # an answer to a SAMPLE sent (period < plant.period); a future one is not
+                    if answered_period < msg.period < plant.period:
                         answered_period = msg.period
-                        if t is Gates:
-                            latest_gates, latest_duty = msg.gates, None
+                        if t is Gates:      # (bits 6-7 reserved: ignored, SPEC 4)
+                            latest_gates, latest_duty = msg.gates & 0x3F, None
                         else:
                             d = msg.duty
                             latest_gates, latest_duty = None, (d[0] / 65535.0, d[1] / 65535.0,

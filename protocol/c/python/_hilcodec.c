@@ -1538,7 +1538,7 @@ static int take_answers(answer_queue *q, unsigned long k, long answer, unsigned 
         }
         if (a->type == HIL_MSG_GATES && answer == 0 && a->u.gates.period == (uint32_t)k &&
             !(a->u.gates.gates & (a->u.gates.gates >> 1) & 0x15)) {
-            *gates = a->u.gates.gates;
+            *gates = a->u.gates.gates & 0x3F;   /* bits 6-7 reserved: ignored (SPEC 4) */
             q->head++;
             return 1;
         }
