@@ -37,6 +37,8 @@ def test_default_project_validates_and_passes_on_the_stub(tmp_path):
     for rel in ("profile.yaml", "README.md", ".github/workflows/hil.yml", ".gitlab-ci.yml",
                 "boards/stub.yaml", "boards/my-firmware.yaml"):
         assert (project / rel).is_file(), rel
+    assert load_board(project / "boards" / "my-firmware.yaml").settings == ()   # a SPEC board
+    assert "controller" not in yaml.safe_load((project / "profile.yaml").read_text())
     plans = plan_files([project / "plans"])
     assert len(plans) == 4
     for p in plans:
@@ -79,6 +81,18 @@ def test_bad_nameplate_names_file_line_and_key(tmp_path):
     assert proc.returncode == 2
     assert f"{nameplate}:2: key 'resistence_ohm'" in proc.stderr
     assert "did you mean 'resistance_ohm'" in proc.stderr
+
+
+@pytest.mark.parametrize("option, value, message", [
+    ("--inertia-kgm2", "-1", "--inertia-kgm2 -1.0: must be positive and finite"),
+    ("--resistance-ohm", "nan", "--resistance-ohm nan: must be positive and finite"),
+    ("--control-period-s", "0.5", "--control-period-s 0.5: must be between 1e-06 and 0.01"),
+    ("--encoder-lines-per-rev", "20000", "--encoder-lines-per-rev 20000: must be between 1 and 16384"),
+])
+def test_bad_option_is_named(tmp_path, option, value, message):
+    proc = hil("init", str(tmp_path / "bench"), option, value)
+    assert proc.returncode == 2 and message in proc.stderr, proc.stderr
+    assert not (tmp_path / "bench").exists()
 
 
 def test_a_folder_that_is_not_empty_is_refused(tmp_path):

@@ -567,6 +567,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                             help=f"default {getattr(defaults, f.name)!r}")
 
 
+_OPTION_RANGES = {"control_period_s": (1e-6, 1e-2), "encoder_lines_per_rev": (1, 16384)}
+
+
+def _check_option(name: str, value: float) -> None:
+    """A number from the command line: finite, positive, and within the range the nameplate
+    file's schema gives (ConfigError naming the option)."""
+    low, high = _OPTION_RANGES.get(name, (0.0, math.inf))
+    if not math.isfinite(value) or value <= 0.0 or not low <= value <= high:
+        bound = f"between {low:g} and {high:g}" if name in _OPTION_RANGES else "positive and finite"
+        raise ConfigError(f"--{name.replace('_', '-')} {value!r}: must be {bound}", "options")
+
+
 def nameplate_from(args) -> Nameplate:
     values: dict = {}
     if args.nameplate is not None:
@@ -578,6 +590,10 @@ def nameplate_from(args) -> Nameplate:
         given = getattr(args, f.name, None)
         if given is not None:
             values[f.name] = given
+    for f in fields(Nameplate):
+        given = getattr(args, f.name, None)
+        if given is not None and f.name != "name":
+            _check_option(f.name, given)
     n = Nameplate(**values)
     if "back_emf_v_per_krpm" in values and "flux_linkage_wb" not in values:
         n.flux_linkage_wb = None
