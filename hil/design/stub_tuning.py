@@ -84,12 +84,15 @@ def control_period_s(m: Motor, given: float | None = None) -> tuple[float, str]:
     t_angle = MAX_ANGLE_PER_PERIOD_RAD / w_e
     bound = min(t_current, t_angle)
     period = next((t for t in PERIOD_LADDER_S if t <= bound * (1 + 1e-9)), PERIOD_LADDER_S[-1])
+    short = ("" if period <= bound * (1 + 1e-9) else
+             f"; WARNING: even {period * 1e6:g} us is longer than that: a larger current step or flux "
+             "turn per period than the paper's")
     return period, (
         f"control period T = the longest of {', '.join(f'{t * 1e6:g}' for t in PERIOD_LADDER_S)} us "
         f"with one period's current step Vdc T / Ls <= I / 16 (T <= Ls I / (16 Vdc) = "
         f"{m.inductance_h:g} * {m.current_limit_a:g} / (16 * {m.dc_link_v:g}) = {t_current * 1e6:.3g} us) "
         f"and the flux turning <= 1 deg a period at rated speed (T <= {t_angle * 1e6:.3g} us): "
-        f"{period * 1e6:g} us (Table 1: 50 us, a 5.1 % current step, 0.9 deg)")
+        f"{period * 1e6:g} us (Table 1: 50 us, a 5.1 % current step, 0.9 deg){short}")
 
 
 def encoder_lines(m: Motor, period_s: float, given: int | None = None) -> tuple[int, str]:
