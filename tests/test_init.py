@@ -10,7 +10,6 @@ import re
 import shutil
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -290,7 +289,6 @@ def test_ci_install_and_run_steps_work_in_a_clean_venv(tmp_path):
     names), build the "firmware" (here a script that runs the stub's hil-stub), run the plans
     on it through exec: with the board file HIL_BOARD names. The dependencies come from this
     venv (no network); hil-bench itself only from the wheel."""
-    started = time.monotonic()
     wheels = tmp_path / "wheels"
     subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q",
                     "-w", str(wheels), str(REPO)], check=True, timeout=300, capture_output=True)
@@ -329,4 +327,3 @@ def test_ci_install_and_run_steps_work_in_a_clean_venv(tmp_path):
     record = json.loads(next((project / "out").glob("**/result.json")).read_text())
     assert record["outcome"] == "PASS" and record["link"].startswith("exec:")
     assert (project / "out" / "junit.xml").is_file()
-    assert time.monotonic() - started < 240
