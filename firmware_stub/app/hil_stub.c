@@ -263,6 +263,14 @@ static void dispatch(hil_stub *s, const hil_msg *in)
          * ignore everything but HELLO */
         s->peer_version_bad = in->u.hello.proto_version != HIL_PROTO_VERSION;
         s->have_answer = 0u; /* a new session: period 0 is a new SAMPLE, not a resend */
+        if (!s->peer_version_bad && in->u.hello.control_period_ns != 0u) {
+            /* The period is a parameter here, not built in: take the bench's if it is in
+             * CONTROL_PERIOD_S's range (the answer then announces it); else keep ours, and
+             * the bench refuses the mismatch (SPEC.md 2.1). */
+            float now;
+            (void)ctl_param_set(&s->core, HIL_PARAM_CONTROL_PERIOD_S,
+                                (float)in->u.hello.control_period_ns * 1e-9f, &now);
+        }
         emit_hello(s);
         s->counters.frames_in++;
         return;

@@ -28,6 +28,26 @@ static void hello_answered_with_build_name(void **state)
     bench_close(&b);
 }
 
+/* The period is a parameter: the stub takes the one the bench's HELLO announces when it is
+ * in CONTROL_PERIOD_S's range (and says so), keeps its own otherwise. */
+static void hello_period_taken_when_in_range(void **state)
+{
+    (void)state;
+    bench b;
+    bench_open(&b);
+    hil_msg h = msg_hello();
+    h.u.hello.control_period_ns = 5000u;
+    bench_send(&b, &h);
+    assert_int_equal(b.replies[0].u.hello.control_period_ns, 5000u);
+    h.u.hello.control_period_ns = 20000000u;       /* 20 ms: above the 10 ms maximum */
+    bench_send(&b, &h);
+    assert_int_equal(b.replies[1].u.hello.control_period_ns, 5000u);
+    h.u.hello.control_period_ns = 0u;              /* none announced: ours stays */
+    bench_send(&b, &h);
+    assert_int_equal(b.replies[2].u.hello.control_period_ns, 5000u);
+    bench_close(&b);
+}
+
 /* A HEARTBEAT frame of header version 2, CRC and COBS by hand (the codec encodes version 1
  * only): into wire (16 bytes), leading and trailing delimiter; returns its length. */
 static size_t other_version_frame(uint8_t *wire)
@@ -383,6 +403,7 @@ int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(hello_answered_with_build_name),
+        cmocka_unit_test(hello_period_taken_when_in_range),
         cmocka_unit_test(other_version_gets_hello_and_nothing_else),
         cmocka_unit_test(answers_in_frame_order_within_one_buffer),
         cmocka_unit_test(parameter_round_trip_and_statuses),

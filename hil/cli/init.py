@@ -1,10 +1,12 @@
 """`hil init DIR`: a bench project for a user's own motor and firmware.
 
-From nameplate values (options or a small YAML file) it writes a bench profile, four starter
-plans whose limits are derived from those values (the derivation in each plan's description,
-as every plan of this project has it), CI files for GitHub Actions and GitLab CI, and a README
-that says how to put the firmware in the loop through each link. Every derived value is
-printed with its formula.
+From nameplate values (options or a small YAML file) it writes a bench profile (the motor, and
+the control period and sensors scaled to it), a board file for the bench's reference stub on
+that motor (its constants and gains derived from the nameplate: hil.design.stub_tuning), a
+board file to fill in for the user's own firmware, four starter plans whose limits are derived
+from the nameplate (the derivation in each plan's description, as every plan of this project
+has it), CI files for GitHub Actions and GitLab CI, and a README that says how to put the
+firmware in the loop through each link. Every derived value is printed with its formula.
 
 Conventions of the inputs (SI units unless the name says otherwise):
 - the back-EMF constant is the line-to-line RMS voltage per 1000 rpm (what most data sheets
@@ -22,11 +24,15 @@ from pathlib import Path
 from configfile.schema import POSITIVE, SchemaChecker, obj
 from configfile.source import ConfigError, load_yaml
 
+from hil.design.stub_tuning import Motor, StubTuning, tune_stub
+
 NAMEPLATE_SCHEMA = obj({
     "pole_pairs": {"type": "integer", "minimum": 1},
     "resistance_ohm": POSITIVE, "inductance_h": POSITIVE, "ld_h": POSITIVE, "lq_h": POSITIVE,
     "flux_linkage_wb": POSITIVE, "back_emf_v_per_krpm": POSITIVE, "inertia_kgm2": POSITIVE,
     "rated_speed_rpm": POSITIVE, "dc_link_v": POSITIVE, "current_limit_a": POSITIVE,
+    "control_period_s": {"type": "number", "minimum": 1e-6, "maximum": 1e-2},
+    "encoder_lines_per_rev": {"type": "integer", "minimum": 1, "maximum": 16384},
     "name": {"type": "string", "minLength": 1},
 })
 
@@ -47,6 +53,8 @@ class Nameplate:
     rated_speed_rpm: float = 3000.0
     dc_link_v: float = 70.0
     current_limit_a: float | None = None
+    control_period_s: float | None = None        # None: derived (hil.design.stub_tuning)
+    encoder_lines_per_rev: int | None = None     # None: derived
 
 
 @dataclass
@@ -65,6 +73,7 @@ class Derived:
     max_speed_rpm: float
     sag_fraction: float
     lines: list[str]
+    tuning: StubTuning      # the stub on this motor: bench period and sensors, board settings
 
 
 def derive(n: Nameplate) -> Derived:
@@ -113,28 +122,130 @@ def derive(n: Nameplate) -> Derived:
     if max_rpm < n.rated_speed_rpm:
         lines.append(f"WARNING: rated speed {n.rated_speed_rpm:g} rpm is above what the DC link "
                      f"supports without field weakening ({max_rpm:.0f} rpm)")
-    return Derived(psi, ld, lq, torque, current, tau, accel, ramp, w_rated, max_rpm, sag, lines)
+    if abs(ld - lq) > 0.1 * lq:
+        lines.append(f"WARNING: Ld = {ld:g} H and Lq = {lq:g} H differ: the stub assumes surface "
+                     "magnets (i_d = 0, one Ls) and is tuned with Lq")
+    motor = Motor(pole_pairs=n.pole_pairs, resistance_ohm=n.resistance_ohm, inductance_h=lq,
+                  flux_linkage_wb=psi, inertia_kgm2=n.inertia_kgm2, rated_speed_rad_s=w_rated,
+                  dc_link_v=n.dc_link_v, current_limit_a=current)
+    tuning = tune_stub(motor, n.control_period_s, n.encoder_lines_per_rev)
+    return Derived(psi, ld, lq, torque, current, tau, accel, ramp, w_rated, max_rpm, sag, lines,
+                   tuning)
+
+
+def _num(value: float) -> str:
+    """A float as YAML 1.1 reads it as one: 8e-05 is a string to PyYAML, 8.0e-05 a float."""
+    text = f"{value:.9g}"
+    mantissa, e, exponent = text.partition("e")
+    if e and "." not in mantissa:
+        text = f"{mantissa}.0e{exponent}"
+    return text
 
 
 def _profile(n: Nameplate, d: Derived) -> str:
+    t = d.tuning
     return f"""# Bench profile for {n.name}, written by `hil init` from its nameplate.
 # Every key not listed takes the paper's default (plant_rt/profiles/paper.yaml); see
-# docs/plant.md for each section. Sensors: set them to your transducers and ADC.
+# docs/plant.md for each section. The control period and the sensors are scaled to the motor
+# the way the paper's are to Table 1 (the derivation: README.md); set `sensors` to your
+# transducers and ADC. What the bench pushes to the board beyond SPEC's required parameters
+# is the board file's (boards/).
+
+timing:
+  control_period_s: {_num(t.control_period_s)}
 
 motor:
   pole_pairs: {n.pole_pairs}
-  resistance_ohm: {n.resistance_ohm!r}
-  flux_linkage_wb: {d.psi_wb:.6g}
-  inductance_d_h: {d.ld_h!r}
-  inductance_q_h: {d.lq_h!r}
-  inertia_kgm2: {n.inertia_kgm2!r}
-  rated_speed_rpm: {n.rated_speed_rpm!r}
+  resistance_ohm: {_num(n.resistance_ohm)}
+  flux_linkage_wb: {_num(d.psi_wb)}
+  inductance_d_h: {_num(d.ld_h)}
+  inductance_q_h: {_num(d.lq_h)}
+  inertia_kgm2: {_num(n.inertia_kgm2)}
+  rated_speed_rpm: {_num(n.rated_speed_rpm)}
 
 dc_link:
-  source_voltage_v: {n.dc_link_v!r}
+  source_voltage_v: {_num(n.dc_link_v)}
 
-controller:                 # pushed to the board with PARAM_SET (protocol/SPEC.md 8.1)
-  torque_limit_nm: {d.torque_limit_nm:.6g}
+sensors:
+  current:                      # +-{t.current_full_scale_a:.4g} A on 12 bits
+    a_per_count: {_num(t.current_full_scale_a / 2048.0)}
+  dc_voltage:                   # {t.dc_voltage_full_scale_v:.4g} V on 12 bits
+    v_per_count: {_num(t.dc_voltage_full_scale_v / 4096.0)}
+  encoder:
+    lines_per_rev: {t.encoder_lines_per_rev}
+  overcurrent_trip_a: {_num(t.settings["overcurrent_a"])}
+  overvoltage_trip_v: {_num(t.overvoltage_trip_v)}
+"""
+
+
+# The stub's parameter declarations, as firmware_stub/board.yaml has them (a board file has no
+# include: tests/test_init.py checks that the two declare the same parameters).
+_STUB_PARAMETERS = """capabilities: [GATES, DUTY, TELEMETRY]
+
+parameters:
+  standard: [stator_resistance_ohm, stator_inductance_h, magnet_flux_wb, flux_ref_wb,
+             flux_band_wb, torque_band_nm, torque_limit_nm, speed_kp_nm_per_rad_s,
+             speed_ki_nm_per_rad, speed_lpf_cutoff_hz, ekf_k1, ekf_k2, ekf_k3,
+             flux_drift_cutoff_hz, overcurrent_a, encoder_loss_timeout_s]
+  vendor:                       # ids, units and ranges as firmware_stub/core/control.c takes them
+    control_law: {id: 60, unit: "1", min: 0, max: 1, default: 0,
+                  description: "0 = DTC (answers GATES), 1 = FOC (answers DUTY while running)"}
+    current_bandwidth_hz: {id: 61, unit: Hz, min: 1, max: 1.0e+5, default: 1000,
+                           description: "FOC d-q current loop bandwidth; Kp = Ls wc, Ki = Rs wc"}
+    foc_angle_source: {id: 62, unit: "1", min: 0, max: 1, default: 0,
+                       description: "FOC rotor angle: 0 = encoder, 1 = EKF angle minus the eq. (25) load angle"}
+    dead_time_comp_s: {id: 63, unit: s, min: 0, max: 1.0e-5, default: 0,
+                       description: "dead-time compensation by current sign, 0 = off"}
+    device_drop_comp_v: {id: 64, unit: V, min: 0, max: 10, default: 0,
+                         description: "DTC: device drop compensated in the observer voltage, 0 = off"}
+    delay_comp_periods: {id: 65, unit: period, min: 0, max: 1, default: 0,
+                         description: "DTC: 1 = answers act one period late (shadow register)"}
+    current_zero_cal_periods: {id: 66, unit: period, min: 0, max: 65535, default: 0,
+                               description: "start-up current-zero calibration with the bridge off, 0 = off"}
+    rs_id_periods: {id: 67, unit: period, min: 0, max: 65535, default: 0,
+                    description: "start-up stator-resistance identification, periods per level, 0 = off"}
+"""
+
+
+def _stub_board(n: Nameplate, d: Derived) -> str:
+    t = d.tuning
+    head = "\n".join("#   " + line for line in t.lines[:4])
+    settings = []
+    for name, value in t.settings.items():
+        settings.append(f"  # {t.notes[name]}")
+        settings.append(f"  {name}: {_num(value)}")
+    settings_text = "\n".join(settings)
+    return f"""# The bench's reference stub (firmware_stub/ in hil-bench) on {n.name}, written by `hil init`:
+# the stub's parameters (as its own board file, firmware_stub/board.yaml, declares them) and
+# settings derived from the nameplate with the formulas that give the stub's defaults on the
+# paper's Table 1 motor (docs/stub.md; hil/design/stub_tuning.py). The bench side of the same
+# derivation is in profile.yaml:
+{head}
+# `hil run plans/ --link stub` runs the plans against the stub with these settings (the plans
+# name this file); `--board boards/my-firmware.yaml` runs them against your firmware instead.
+name: hil-bench reference stub on {n.name}
+description: The paper's DTC drive with the simplified EKF, tuned by hil init for {n.name}.
+{_STUB_PARAMETERS}
+settings:
+{settings_text}
+"""
+
+
+def _my_board(n: Nameplate, d: Derived) -> str:
+    return f"""# Your firmware's board file (hil-bench docs/boards.md): what your board takes and what the
+# bench pushes to it at every session start besides SPEC's required parameters (the control
+# period, the sensor scaling and the pole pairs, from profile.yaml). As written it is a board
+# built from protocol/SPEC.md alone: nothing more is pushed. Add the standard parameters your
+# board takes, its own, and the settings it needs for {n.name} (boards/stub.yaml shows the
+# stub's, derived from the nameplate).
+name: my firmware
+# capabilities: [DUTY, TELEMETRY]
+# parameters:
+#   standard: [torque_limit_nm, overcurrent_a]
+#   vendor:
+#     velocity_lpf_hz: {{id: 300, unit: Hz, min: 1, max: 5000, default: 100}}
+# settings:
+#   torque_limit_nm: {d.torque_limit_nm:.6g}      # 3/2 p psi_f I (README.md)
 """
 
 
@@ -147,7 +258,9 @@ def _plans(n: Nameplate, d: Derived) -> dict[str, str]:
     rise_lo, rise_hi = 0.8 * ramp_ms * 0.9, 0.8 * ramp_ms * 2.0
     settle_ms = 5.0 * ramp_ms + 100.0
     wait_s = max(0.5, 4.0 * d.ramp_s + 0.3)
-    common = "profile: ../profile.yaml\n"
+    # Each plan runs on the project's profile and, unless --board says otherwise, on the stub
+    # tuned for the motor: `hil run plans/ --link stub` passes out of the box.
+    common = "profile: ../profile.yaml\nboard: ../boards/stub.yaml\n"
     derivation = "\n".join("  - " + line for line in d.lines)
     return {
         "01_speed_step.yaml": f"""name: {n.name}-speed-step
@@ -294,35 +407,70 @@ description: |
     }
 
 
-_GITHUB = """name: hil
+# Where CI installs hil-bench from: a pip requirement (`hil init --hil-bench SOURCE`). hil-bench
+# is not on PyPI: a wheel built by `pip wheel --no-deps .` in a hil-bench checkout (committed to
+# the project, or on a server), or `hil-bench @ git+https://HOST/OWNER/hil-bench@TAG`. Without
+# one the install step stops with a message that says so.
+_NO_SOURCE_MESSAGE = ("HIL_BENCH is not set: set it in this file to where hil-bench installs from "
+                      "(a wheel built by pip wheel --no-deps . in a hil-bench checkout, or "
+                      "hil-bench @ git+https://HOST/OWNER/hil-bench@TAG); "
+                      "hil init --hil-bench SOURCE writes it")
+_INSTALL = ('if [ -z "$HIL_BENCH" ]; then\n  echo "' + _NO_SOURCE_MESSAGE + '" >&2\n  exit 1\nfi\n'
+            'python -m pip install "$HIL_BENCH"\n')
+_RUN = 'hil run plans --link "$HIL_LINK" --board "$HIL_BOARD" --out out --no-progress'
+
+
+def _yaml_str(text: str) -> str:
+    """A YAML double-quoted scalar (JSON's string syntax is YAML's)."""
+    import json
+
+    return json.dumps(text)
+
+
+def _indent(text: str, spaces: int) -> str:
+    return "\n".join(" " * spaces + line for line in text.rstrip("\n").split("\n"))
+
+
+def _github(source: str) -> str:
+    return f"""name: hil
 on: [push, pull_request]
+env:
+  HIL_BENCH: {_yaml_str(source)}        # pip requirement hil-bench installs from
+  HIL_LINK: "exec:firmware/build/my-firmware"
+  HIL_BOARD: boards/my-firmware.yaml
 jobs:
   hil:
     runs-on: ubuntu-latest
     steps:
       - uses: actions/checkout@v4
       - uses: actions/setup-python@v5
-        with: {python-version: "3.11"}
-      - run: python -m pip install hil-bench
+        with: {{python-version: "3.11"}}
+      - name: install hil-bench
+        run: |
+{_indent(_INSTALL, 10)}
       - run: make -C firmware            # build your firmware (an executable or a .so)
-      - run: hil run plans --link "$HIL_LINK" --out out
-        env: {HIL_LINK: "exec:firmware/build/my-firmware"}
+      - run: {_RUN}
       - uses: actions/upload-artifact@v4
         if: always()
-        with: {name: hil-reports, path: out}
+        with: {{name: hil-reports, path: out}}
       - uses: mikepenz/action-junit-report@v4
         if: always()
-        with: {report_paths: out/junit.xml}
+        with: {{report_paths: out/junit.xml}}
 """
 
-_GITLAB = """hil:
+
+def _gitlab(source: str) -> str:
+    return f"""hil:
   image: python:3.11
   variables:
+    HIL_BENCH: {_yaml_str(source)}      # pip requirement hil-bench installs from
     HIL_LINK: "exec:firmware/build/my-firmware"
+    HIL_BOARD: boards/my-firmware.yaml
   script:
-    - python -m pip install hil-bench
+    - |
+{_indent(_INSTALL, 6)}
     - make -C firmware                 # build your firmware (an executable or a .so)
-    - hil run plans --link "$HIL_LINK" --out out
+    - {_RUN}
   artifacts:
     when: always
     paths: [out]
@@ -331,27 +479,57 @@ _GITLAB = """hil:
 """
 
 
-def _readme(n: Nameplate, d: Derived) -> str:
+def _readme(n: Nameplate, d: Derived, source: str) -> str:
     derivation = "\n".join("- " + line for line in d.lines)
+    tuning = "\n".join("- " + line for line in d.tuning.lines)
+    install = (f"`{source}`" if source else
+               "not set yet: set `HIL_BENCH` in both files (or run `hil init --hil-bench SOURCE` "
+               "again), or their install step stops with a message saying so")
     return f"""# Bench project: {n.name}
 
-Written by `hil init`. `profile.yaml` is the plant (your motor on the paper's inverter and
-sensors: set the `sensors` section to your transducers), `plans/` four starter plans whose
-limits are derived from the nameplate below (each plan's description says how), and CI files
-for GitHub Actions (`.github/workflows/hil.yml`) and GitLab CI (`.gitlab-ci.yml`) that run the
-plans and publish the JUnit XML.
+Written by `hil init`.
+
+| file | what |
+|---|---|
+| `profile.yaml` | the plant: your motor on the paper's inverter, with the control period and the sensors scaled to it (set `sensors` to your transducers and ADC) |
+| `boards/stub.yaml` | the bench's reference stub on this motor: its parameters and settings derived from the nameplate (below) |
+| `boards/my-firmware.yaml` | your firmware's board file, to fill in (hil-bench docs/boards.md) |
+| `plans/` | four starter plans whose limits are derived from the nameplate (each plan's description says how) |
+| `.github/workflows/hil.yml`, `.gitlab-ci.yml` | CI for GitHub Actions and GitLab CI: install hil-bench, build your firmware, run the plans on it, publish the JUnit XML |
 
 ```sh
-hil plans plans/                                  # validate
-hil run plans/ --link exec:path/to/your-firmware  # run; out/index.html, out/junit.xml
+hil plans plans/                                      # validate
+hil run plans/ --link stub                            # the bench's stub on this motor (boards/stub.yaml)
+hil run plans/ --link exec:path/to/your-firmware --board boards/my-firmware.yaml
 ```
 
-The limits are for your firmware, not for the bench's stub: the stub's gains are designed for
-the paper's motor and may not meet them on another one.
+Each plan names `board: ../boards/stub.yaml`, so on the stub's links it runs the stub with the
+settings derived here. `--board FILE` overrides a plan's board: with your firmware give your
+board file (as the CI files do); without it, your firmware would be sent the stub's settings.
 
 ## Derived from the nameplate
 
 {derivation}
+
+## The stub on this motor
+
+The stub's defaults (hil-bench firmware_stub/core/defaults.h, derived in docs/stub.md) are
+tuned for the paper's Table 1 motor. The same formulas with this nameplate give the bench's
+control period and sensors (`profile.yaml`) and the stub's settings (`boards/stub.yaml`); on the
+Table 1 nameplate they give the stub's defaults (in brackets):
+
+{tuning}
+
+The flux-drift corner (10 Hz) and the start-up options stay at the stub's defaults.
+
+## CI
+
+hil-bench is not on PyPI. The CI files install it from `HIL_BENCH`, a pip requirement:
+{install}. Either a wheel built in a hil-bench checkout (`pip wheel --no-deps -w dist .`; commit
+it to this project or put it on a server) or `hil-bench @ git+https://HOST/OWNER/hil-bench@TAG`.
+The wheel is pure Python: it carries neither the plant's nor the codec's C extension (the bench
+runs them in Python, slower) nor the stub; your firmware is built by `make -C firmware` and
+run through `HIL_LINK` with the board file `HIL_BOARD`.
 
 ## Putting your firmware in the loop
 
@@ -376,11 +554,29 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("dir", type=Path, help="the project folder to create")
     parser.add_argument("--nameplate", type=Path, help="YAML with the values below (keys as the options, _ for -)")
     parser.add_argument("--force", action="store_true", help="write into a folder that is not empty")
+    parser.add_argument("--hil-bench", metavar="SOURCE", default="",
+                        help="pip requirement the CI files install hil-bench from (a wheel built by "
+                             "`pip wheel --no-deps .` in a hil-bench checkout, or "
+                             "'hil-bench @ git+https://HOST/OWNER/hil-bench@TAG'); without it their "
+                             "install step stops and says so")
     defaults = Nameplate()
     for f in fields(Nameplate):
-        kind = int if f.name == "pole_pairs" else (str if f.name == "name" else float)
+        kind = (int if f.name in ("pole_pairs", "encoder_lines_per_rev")
+                else (str if f.name == "name" else float))
         parser.add_argument(f"--{f.name.replace('_', '-')}", type=kind, default=None,
                             help=f"default {getattr(defaults, f.name)!r}")
+
+
+_OPTION_RANGES = {"control_period_s": (1e-6, 1e-2), "encoder_lines_per_rev": (1, 16384)}
+
+
+def _check_option(name: str, value: float) -> None:
+    """A number from the command line: finite, positive, and within the range the nameplate
+    file's schema gives (ConfigError naming the option)."""
+    low, high = _OPTION_RANGES.get(name, (0.0, math.inf))
+    if not math.isfinite(value) or value <= 0.0 or not low <= value <= high:
+        bound = f"between {low:g} and {high:g}" if name in _OPTION_RANGES else "positive and finite"
+        raise ConfigError(f"--{name.replace('_', '-')} {value!r}: must be {bound}", "options")
 
 
 def nameplate_from(args) -> Nameplate:
@@ -394,6 +590,10 @@ def nameplate_from(args) -> Nameplate:
         given = getattr(args, f.name, None)
         if given is not None:
             values[f.name] = given
+    for f in fields(Nameplate):
+        given = getattr(args, f.name, None)
+        if given is not None and f.name != "name":
+            _check_option(f.name, given)
     n = Nameplate(**values)
     if "back_emf_v_per_krpm" in values and "flux_linkage_wb" not in values:
         n.flux_linkage_wb = None
@@ -415,8 +615,10 @@ def init_command(args) -> int:
         print(f"hil init: {target} is not empty (use --force to write into it)", file=sys.stderr)
         return 2
     d = derive(n)
-    files = {"profile.yaml": _profile(n, d), "README.md": _readme(n, d),
-             ".github/workflows/hil.yml": _GITHUB, ".gitlab-ci.yml": _GITLAB}
+    source = args.hil_bench or ""
+    files = {"profile.yaml": _profile(n, d), "README.md": _readme(n, d, source),
+             "boards/stub.yaml": _stub_board(n, d), "boards/my-firmware.yaml": _my_board(n, d),
+             ".github/workflows/hil.yml": _github(source), ".gitlab-ci.yml": _gitlab(source)}
     files.update({f"plans/{name}": text for name, text in _plans(n, d).items()})
     for rel, text in files.items():
         path = target / rel
@@ -425,5 +627,10 @@ def init_command(args) -> int:
     print(f"hil init: {n.name} in {target}")
     for line in d.lines:
         print(f"  {line}")
+    print("  the stub on this motor (profile.yaml's period and sensors, boards/stub.yaml):")
+    for line in d.tuning.lines:
+        print(f"  {line}")
+    if not source:
+        print("  CI: no --hil-bench SOURCE given: set HIL_BENCH in the CI files (README.md)")
     print(f"  wrote {', '.join(sorted(files))}")
     return 0
