@@ -668,10 +668,11 @@ class BenchSession:
     def _step_duty_legs(self, duty: tuple[float, float, float], legs: int) -> None:
         """A DUTY_LEGS answer: the plant floats the legs whose bit is 0; the leg enables in
         force are recorded as a step signal when they change."""
+        k = self.plant.period
         self.plant.step(duty=duty, legs=legs)
         if legs != self._leg_enable_logged:
             self._leg_enable_logged = legs
-            self.recorder.step_value(LEG_ENABLE_SIGNAL, self.plant.period - 1, legs)
+            self.recorder.step_value(LEG_ENABLE_SIGNAL, k, legs)
         if self._answer_kind is not DutyLegs:
             self._note_answer_kind(DutyLegs)
 
