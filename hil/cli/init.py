@@ -356,7 +356,7 @@ the paper's motor and may not meet them on another one.
 ## Putting your firmware in the loop
 
 Write it from the bench's protocol specification (protocol/SPEC.md in hil-bench: HELLO,
-PARAM_SET/GET, COMMAND, SAMPLE -> GATES or DUTY, TELEMETRY, SHUTDOWN; the machine and sensor
+PARAM_SET/GET, COMMAND, SAMPLE -> GATES, DUTY or DUTY_LEGS, TELEMETRY, SHUTDOWN; the machine and sensor
 conventions in its section 1.1), then pick a link:
 
 | link | your firmware is |
