@@ -29,7 +29,10 @@ def answer(sample, encoder) -> bytes:
     duty, legs = command(sample.period)
     if sample.period == 5:
         legs |= 0xF8                    # reserved bits: the bench must ignore them (SPEC 4)
-    return encoder.encode(DutyLegs(sample.period, duty, legs))
+    stale = b""
+    if sample.period == 20:             # an answer for another period first: counted, not applied
+        stale = encoder.encode(DutyLegs(19, (65535, 65535, 65535), LEG_A | LEG_B | LEG_C))
+    return stale + encoder.encode(DutyLegs(sample.period, duty, legs))
 
 
 def test_board_answering_duty_legs_floats_its_legs():
@@ -37,7 +40,8 @@ def test_board_answering_duty_legs_floats_its_legs():
         config = SessionConfig(link=board.url, policy=FAST, hold_cpu_latency=False)
         with BenchSession(load_profile(), config) as session:
             session.run_periods(PERIODS)
-            assert (session.missed_answers, session.stale_answers) == (0, 0)
+            assert (session.missed_answers, session.stale_answers) == (0, 1)
+            assert not [e for e in session.events if e[1] == "answer_type"]  # advertised
             truth = session.recorder.truth_rows
             signals = session.recorder.arrays()
     reference = Plant(load_profile(), seed=0)
@@ -53,3 +57,14 @@ def test_board_answering_duty_legs_floats_its_legs():
     assert np.all(np.abs(i_c) < 1e-12) and np.all(i_a > 0.1)
     _, leg_enable, _ = signals[LEG_ENABLE_SIGNAL]
     assert list(leg_enable) == [command(k)[1] for k in range(PERIODS)]
+
+
+def test_duty_legs_from_a_board_that_does_not_advertise_it_is_accepted_and_logged():
+    """SPEC 2.8.4: a GATES-only board answering DUTY_LEGS is accepted and logged once."""
+    with FakeBoard(capabilities=0x1, on_sample=answer) as board:
+        config = SessionConfig(link=board.url, policy=FAST, hold_cpu_latency=False)
+        with BenchSession(load_profile(), config) as session:
+            session.run_periods(4)
+            notes = [e[2] for e in session.events if e[1] == "answer_type"]
+    assert notes == [{"type": "DUTY_LEGS", "capabilities": 1,
+                      "note": "answers with a type it does not advertise"}]

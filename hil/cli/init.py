@@ -534,7 +534,7 @@ run through `HIL_LINK` with the board file `HIL_BOARD`.
 ## Putting your firmware in the loop
 
 Write it from the bench's protocol specification (protocol/SPEC.md in hil-bench: HELLO,
-PARAM_SET/GET, COMMAND, SAMPLE -> GATES or DUTY, TELEMETRY, SHUTDOWN; the machine and sensor
+PARAM_SET/GET, COMMAND, SAMPLE -> GATES, DUTY or DUTY_LEGS, TELEMETRY, SHUTDOWN; the machine and sensor
 conventions in its section 1.1), then pick a link:
 
 | link | your firmware is |

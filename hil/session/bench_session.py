@@ -491,7 +491,7 @@ class BenchSession:
                                          "period": msg.period})
         elif t is Gates or t is Duty or t is DutyLegs:
             self.stale_answers += 1
-            self._last_stale = (t.__name__.upper(), msg.period)
+            self._last_stale = (t.TYPE.name, msg.period)
         if self.board_hello is None and self.conn is not None:
             seen = self._seen_during_hello
             name = t.__name__.upper()
@@ -747,10 +747,11 @@ class BenchSession:
     def _step_duty_legs(self, duty: tuple[float, float, float], legs: int) -> None:
         """A DUTY_LEGS answer: the plant floats the legs whose bit is 0; the leg enables in
         force are recorded as a step signal when they change."""
+        k = self.plant.period
         self.plant.step(duty=duty, legs=legs)
         if legs != self._leg_enable_logged:
             self._leg_enable_logged = legs
-            self.recorder.step_value(LEG_ENABLE_SIGNAL, self.plant.period - 1, legs)
+            self.recorder.step_value(LEG_ENABLE_SIGNAL, k, legs)
         if self._answer_kind is not DutyLegs:
             self._note_answer_kind(DutyLegs)
 
@@ -761,10 +762,10 @@ class BenchSession:
         caps = self.board_hello.capabilities if self.board_hello is not None else 0x3
         bit = _ANSWER_CAPS[kind]
         if first and not caps & bit:
-            self._event("answer_type", {"type": kind.__name__.upper(), "capabilities": caps,
+            self._event("answer_type", {"type": kind.TYPE.name, "capabilities": caps,
                                         "note": "answers with a type it does not advertise"})
         elif not first:
-            self._event("answer_type", {"type": kind.__name__.upper(),
+            self._event("answer_type", {"type": kind.TYPE.name,
                                         "note": "the board switched answer type"})
 
     def _shoot_through(self, k: int, gates: int) -> None:

@@ -763,8 +763,9 @@ int hil_can_pack(const hil_msg *msg, uint8_t sender_role, uint16_t base_id, hil_
         }
         frames[0].id = id;
         frames[0].dlc = 8;
-        put_u16(frames[0].data, (uint16_t)((msg->u.duty_legs.period & CAN_DUTY_LEGS_PERIOD_MASK) |
-                                           ((uint32_t)msg->u.duty_legs.leg_enable << CAN_DUTY_LEGS_PERIOD_BITS)));
+        uint32_t word = (msg->u.duty_legs.period & CAN_DUTY_LEGS_PERIOD_MASK) |
+                        ((uint32_t)msg->u.duty_legs.leg_enable << CAN_DUTY_LEGS_PERIOD_BITS);
+        put_u16(frames[0].data, (uint16_t)word);
         for (size_t i = 0; i < 3u; i++) {
             put_u16(frames[0].data + 2 + 2 * i, msg->u.duty_legs.duty[i]);
         }
@@ -870,7 +871,8 @@ static int can_single(hil_can_rx *rx, uint8_t type, const hil_can_frame *f, hil_
             return 0;
         }
         uint16_t word = get_u16(f->data);
-        out->u.duty_legs.period = can_extend_period(rx, word & CAN_DUTY_LEGS_PERIOD_MASK, CAN_DUTY_LEGS_PERIOD_BITS);
+        out->u.duty_legs.period =
+            can_extend_period(rx, word & CAN_DUTY_LEGS_PERIOD_MASK, CAN_DUTY_LEGS_PERIOD_BITS);
         out->u.duty_legs.leg_enable = (uint8_t)(word >> CAN_DUTY_LEGS_PERIOD_BITS);
         for (size_t i = 0; i < 3u; i++) {
             out->u.duty_legs.duty[i] = get_u16(f->data + 2 + 2 * i);

@@ -6,10 +6,10 @@
  *
  * The UART interrupts move bytes between the peripheral and two rings; the
  * main loop hands received bytes to hil_fw_exchange, which runs one control
- * period when a SAMPLE frame completes and returns GATES (+ TELEMETRY...); the
+ * period when a SAMPLE frame completes and returns DUTY_LEGS (+ TELEMETRY...); the
  * answer goes into the TX ring. With nothing to do the core sleeps in WFI. On a
- * power stage the trigger would be the PWM-synchronous ADC interrupt and GATES
- * a write to the timer's output modes (docs/porting.md).
+ * power stage the trigger would be the PWM-synchronous ADC interrupt and DUTY_LEGS
+ * a write to the timer's compare registers and output enables (docs/porting.md).
  */
 #include <stddef.h>
 #include <stdint.h>

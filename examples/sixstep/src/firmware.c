@@ -32,7 +32,7 @@
 static const char fw_name[] = "sixstep-example " SIXSTEP_FW_VERSION " " SIXSTEP_TARGET;
 typedef char fw_name_fits_hello[(sizeof fw_name - 1u <= HIL_NAME_MAX) ? 1 : -1];
 
-/* Largest burst one SAMPLE causes: GATES 13 + TELEMETRY 64 + FAULT 18 + STATUS 15
+/* Largest burst one SAMPLE causes: DUTY_LEGS 19 + TELEMETRY 64 + FAULT 18 + STATUS 15
  * bytes; the rest is room for PARAM_VALUEs the bench sends in a row. */
 #define OUT_BYTES 1024u
 
@@ -251,7 +251,7 @@ static void emit_hello(sixstep_fw *f)
     m.type = HIL_MSG_HELLO;
     m.u.hello.proto_version = HIL_PROTO_VERSION;
     m.u.hello.role = HIL_ROLE_CONTROLLER;
-    m.u.hello.capabilities = HIL_CAP_GATES | HIL_CAP_TELEMETRY;
+    m.u.hello.capabilities = HIL_CAP_DUTY_LEGS | HIL_CAP_TELEMETRY;
     m.u.hello.control_period_ns = (uint32_t)(f->control_period_s * 1e9f + 0.5f);
     m.u.hello.name_len = (uint8_t)(sizeof fw_name - 1u);
     memcpy(m.u.hello.name, fw_name, sizeof fw_name - 1u);
@@ -278,6 +278,35 @@ static void trip(sixstep_fw *f, uint16_t code, float value, uint32_t period)
 }
 
 /* ---- one control period ------------------------------------------------ */
+
+/* The chopper's switch word as the DUTY_LEGS answer (SPEC.md 6.12): a leg with its high switch
+ * on is at duty 1 all period, with its low switch on at duty 0, with neither it is floated (the
+ * open phase of block commutation). The same switching as that GATES word; a PWM chopper would
+ * put its duty in place of the 1. */
+static void duty_legs_of_gates(uint8_t gates, hil_duty_legs *answer)
+{
+    answer->leg_enable = 0u;
+    for (unsigned x = 0u; x < 3u; x++) {
+        unsigned high = (gates >> (2u * x)) & 1u;
+        unsigned low = (gates >> (2u * x + 1u)) & 1u;
+        answer->duty[x] = high != 0u ? 0xFFFFu : 0u;
+        if ((high | low) != 0u) {
+            answer->leg_enable = (uint8_t)(answer->leg_enable | (1u << x));
+        }
+    }
+}
+
+/* TELEMETRY gates for a DUTY_LEGS answer (SPEC.md 6.6): both switches of every enabled leg. */
+static uint8_t telemetry_gates(const hil_duty_legs *answer)
+{
+    uint8_t mask = 0u;
+    for (unsigned x = 0u; x < 3u; x++) {
+        if ((answer->leg_enable >> x) & 1u) {
+            mask = (uint8_t)(mask | (0x03u << (2u * x)));
+        }
+    }
+    return mask;
+}
 
 static void phase_currents(const sixstep_fw *f, const hil_sample *s, float i_abc[3])
 {
@@ -337,9 +366,10 @@ static void on_sample(sixstep_fw *f, const hil_sample *s)
     }
 
     hil_msg m;
-    m.type = HIL_MSG_GATES;
-    m.u.gates.period = s->period;
-    m.u.gates.gates = gates;
+    m.type = HIL_MSG_DUTY_LEGS;
+    m.u.duty_legs.period = s->period;
+    duty_legs_of_gates(gates, &m.u.duty_legs);
+    uint8_t conducting = telemetry_gates(&m.u.duty_legs);
     emit(f, &m);
     if (f->telemetry_divider != 0u && s->period % f->telemetry_divider == 0u) {
         memset(&m, 0, sizeof m);
@@ -349,7 +379,7 @@ static void on_sample(sixstep_fw *f, const hil_sample *s)
         t->sector = sector;
         t->speed_source = HIL_SPEED_ENCODER;
         t->state = f->state;
-        t->gates = gates;
+        t->gates = conducting;
         t->speed_feedback_rad_s = speed;
         t->speed_encoder_rad_s = speed;
         t->torque_est_nm = torque_est;

@@ -71,7 +71,7 @@ static void hello_params_sample_shutdown(void **state)
     assert_int_equal(exchange(fw, &m, out, 8), 1);
     assert_int_equal(out[0].type, HIL_MSG_HELLO);
     assert_int_equal(out[0].u.hello.role, HIL_ROLE_CONTROLLER);
-    assert_int_equal(out[0].u.hello.capabilities, HIL_CAP_GATES | HIL_CAP_TELEMETRY);
+    assert_int_equal(out[0].u.hello.capabilities, HIL_CAP_DUTY_LEGS | HIL_CAP_TELEMETRY);
 
     /* every parameter the bench pushes at session start is accepted and read back */
     static const struct { uint16_t id; float v; } pushed[] = {
@@ -111,11 +111,15 @@ static void hello_params_sample_shutdown(void **state)
     m.u.sample.adc_i1 = m.u.sample.adc_i2 = 2048u;
     m.u.sample.adc_vdc = 2867u;
     assert_int_equal(exchange(fw, &m, out, 8), 2);
-    assert_int_equal(out[0].type, HIL_MSG_GATES);
-    assert_int_equal(out[0].u.gates.period, 7u);
-    assert_int_equal(out[0].u.gates.gates, HIL_GATE_B_HIGH | HIL_GATE_C_LOW);
+    /* B high all period, C low all period, A floated */
+    assert_int_equal(out[0].type, HIL_MSG_DUTY_LEGS);
+    assert_int_equal(out[0].u.duty_legs.period, 7u);
+    assert_int_equal(out[0].u.duty_legs.leg_enable, HIL_LEG_B | HIL_LEG_C);
+    assert_int_equal(out[0].u.duty_legs.duty[1], 65535u);
+    assert_int_equal(out[0].u.duty_legs.duty[2], 0u);
     assert_int_equal(out[1].type, HIL_MSG_TELEMETRY);
     assert_int_equal(out[1].u.telemetry.sector, 2);
+    assert_int_equal(out[1].u.telemetry.gates, 0x3Cu); /* legs B and C switching */
 
     memset(&m, 0, sizeof m);
     m.type = HIL_MSG_SHUTDOWN;
@@ -127,7 +131,8 @@ static void hello_params_sample_shutdown(void **state)
     m.u.sample.period = 8u;
     m.u.sample.adc_i1 = m.u.sample.adc_i2 = 2048u;
     exchange(fw, &m, out, 8);
-    assert_int_equal(out[0].u.gates.gates, 0u); /* switching stopped */
+    assert_int_equal(out[0].type, HIL_MSG_DUTY_LEGS);
+    assert_int_equal(out[0].u.duty_legs.leg_enable, 0u); /* switching stopped: every leg floated */
     hil_fw_destroy(fw);
 }
 
