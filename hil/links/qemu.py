@@ -101,7 +101,7 @@ def _require_tool(name: str) -> str:
         raise QemuToolMissing(
             f"{name} not found on PATH: install the Debian package(s) {package} with "
             f"'sudo apt-get update && sudo apt-get install -y {package}' "
-            f"(scripts/bootstrap.sh does this when run as root)")
+            f"(scripts/bootstrap.sh --test does this when run as root)")
     return path
 
 
