@@ -11,6 +11,8 @@ from pathlib import Path
 
 import pytest
 
+pytest_plugins = ["pytester"]
+
 from hil.links import qemu as qemu_module
 from hil.plans.format import load_plan
 from hil.plans.outcome import Outcome
@@ -49,3 +51,14 @@ def test_hil_run_exits_0_for_a_skipped_plan(tmp_path):
     assert got.returncode == 0, got.stdout + got.stderr
     assert got.stdout.startswith("SKIPPED  qemu-speed-step")
     assert "qemu-system-arm not found on PATH" in got.stdout
+
+
+def test_the_pytest_plugin_skips_the_plan_and_its_checks(pytester, monkeypatch):
+    _without(monkeypatch, "qemu-system-arm")
+    monkeypatch.setenv("PYTEST_DISABLE_PLUGIN_AUTOLOAD", "1")
+    plans = pytester.mkdir("test_plans")
+    (plans / QEMU_PLAN.name).write_text(QEMU_PLAN.read_text())
+    result = pytester.runpytest("test_plans", "-rs", "-p", "hil.run.pytest_plugin",
+                                "-p", "no:cacheprovider")
+    result.assert_outcomes(skipped=1 + len(load_plan(QEMU_PLAN).checks))
+    result.stdout.fnmatch_lines(["*qemu-system-arm not found on PATH*"])
