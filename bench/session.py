@@ -121,7 +121,9 @@ def stub_log_plant_interleaved(periods: int, batches: int) -> dict:
             plain.close()
             logged.close()
     med = {k: statistics.median(v) for k, v in rates.items()}
-    out = {k: {"periods_per_s": round(v), "us_per_period": round(1e6 / v, 2)} for k, v in med.items()}
+    out = {k: {"periods_per_s": round(v), "us_per_period": round(1e6 / v, 2),
+               "batch_periods_per_s_range": [round(min(rates[k])), round(max(rates[k]))]}
+           for k, v in med.items()}
     out["batches"], out["periods_per_batch"] = batches, periods
     out["log_us_per_period"] = round(1e6 / med["stub+log"] - 1e6 / med["stub"], 2)
     out["stub+log_vs_plant_only"] = round(med["plant_only"] / med["stub+log"], 2)

@@ -1,42 +1,73 @@
 #!/usr/bin/env bash
-# Sets up everything the bench needs on a fresh Debian machine that has python3, gcc and make:
+# Sets up the bench on a fresh Debian machine that has python3, gcc and make:
 # system packages (apt-get, as root), a .venv with the package installed from the lock file,
 # the C code built. Idempotent and quick when nothing changed.
+#
+#   scripts/bootstrap.sh --run    what running plans needs (`make run`): python3 with venv and
+#                                 its headers, gcc, make. QEMU and the Arm toolchain are not
+#                                 demanded: the QEMU plan reports SKIPPED, naming them, without.
+#   scripts/bootstrap.sh --test   (the default) that and every tool the tests use (`make test`):
+#                                 clang with libFuzzer, valgrind, cppcheck, cmocka, QEMU, the Arm
+#                                 toolchain, socat, chromium.
+#   --check                       only check the packages: name the missing ones, install nothing.
 #
 # A package counts as present only when every FILE the build takes from it is there, not
 # just its binary: clang without libclang-rt-14-dev compiles, then fails to link a fuzzer
 # (issue 12). After installing, the same files are checked again and a missing one is named.
+# A program is looked for on PATH (CMD:name), so a PATH without it counts as without it.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+
+mode=test
+check_only=0
+for arg in "$@"; do
+  case $arg in
+    --run) mode=run ;;
+    --test) mode=test ;;
+    --check) check_only=1 ;;
+    *) echo "bootstrap: unknown option '$arg'; expected --run, --test and/or --check" >&2; exit 2 ;;
+  esac
+done
 
 arch=$(uname -m)
 
 # The interpreter .venv is made from ($PYTHON, else the distribution's python3, else PATH's:
 # scripts/pick_python.sh says why).
 py=$(bash scripts/pick_python.sh)
-# Debian package -> files (shell globs) the build or the tests use from it, ';'-separated.
-declare -A NEEDED=(
-  [libcmocka-dev]="/usr/include/cmocka.h;/usr/lib/*/libcmocka.so"
-  [clang]="/usr/bin/clang"
-  # libFuzzer and the sanitizer runtimes that `clang -fsanitize=fuzzer,address,undefined` links
-  [libclang-rt-14-dev]="/usr/lib/llvm-*/lib/clang/*/lib/linux/libclang_rt.fuzzer-${arch}.a;/usr/lib/llvm-*/lib/clang/*/lib/linux/libclang_rt.asan-${arch}.a;/usr/lib/llvm-*/lib/clang/*/lib/linux/libclang_rt.ubsan_standalone-${arch}.a"
-  # gcc's own sanitizer runtimes (tests built with gcc -fsanitize=address,undefined)
-  [libasan8]="/usr/lib/gcc/*/*/libasan.so"
-  [libubsan1]="/usr/lib/gcc/*/*/libubsan.so"
-  [valgrind]="/usr/bin/valgrind"
-  [cppcheck]="/usr/bin/cppcheck"
-  [gcc-arm-none-eabi]="/usr/bin/arm-none-eabi-gcc;/usr/lib/gcc/arm-none-eabi/*/thumb/v7e-m+fp/hard/libgcc.a"
-  # newlib-nano for the hard-float Cortex-M4F (the QEMU image links --specs=nano.specs -lc -lm)
-  [libnewlib-arm-none-eabi]="/usr/lib/arm-none-eabi/newlib/nano.specs;/usr/lib/arm-none-eabi/newlib/thumb/v7e-m+fp/hard/libc_nano.a;/usr/lib/arm-none-eabi/newlib/thumb/v7e-m+fp/hard/libm.a"
-  [qemu-system-arm]="/usr/bin/qemu-system-arm"
-  [socat]="/usr/bin/socat"
-  # headless browser for the report rendering test
-  [chromium]="/usr/bin/chromium"
+# Debian package -> files (shell globs) or programs (CMD:) a part uses from it, ';'-separated.
+# What running plans needs (`make run`):
+declare -A RUN_NEEDED=(
+  [gcc]="CMD:gcc"
+  [make]="CMD:make"
   # python3 -m venv needs ensurepip's wheels
   [python3-venv]="PYTHON:ensurepip,venv"
   # Python.h: the C codec's extension module (protocol/c/python) is compiled against it
   [python3-dev]="PYINCLUDE:Python.h"
 )
+# What the tests add (`make test`):
+declare -A TEST_NEEDED=(
+  [libcmocka-dev]="/usr/include/cmocka.h;/usr/lib/*/libcmocka.so"
+  [clang]="CMD:clang"
+  # libFuzzer and the sanitizer runtimes that `clang -fsanitize=fuzzer,address,undefined` links
+  [libclang-rt-14-dev]="/usr/lib/llvm-*/lib/clang/*/lib/linux/libclang_rt.fuzzer-${arch}.a;/usr/lib/llvm-*/lib/clang/*/lib/linux/libclang_rt.asan-${arch}.a;/usr/lib/llvm-*/lib/clang/*/lib/linux/libclang_rt.ubsan_standalone-${arch}.a"
+  # gcc's own sanitizer runtimes (tests built with gcc -fsanitize=address,undefined)
+  [libasan8]="/usr/lib/gcc/*/*/libasan.so"
+  [libubsan1]="/usr/lib/gcc/*/*/libubsan.so"
+  [valgrind]="CMD:valgrind"
+  [cppcheck]="CMD:cppcheck"
+  [gcc-arm-none-eabi]="CMD:arm-none-eabi-gcc;/usr/lib/gcc/arm-none-eabi/*/thumb/v7e-m+fp/hard/libgcc.a"
+  # newlib-nano for the hard-float Cortex-M4F (the QEMU image links --specs=nano.specs -lc -lm)
+  [libnewlib-arm-none-eabi]="/usr/lib/arm-none-eabi/newlib/nano.specs;/usr/lib/arm-none-eabi/newlib/thumb/v7e-m+fp/hard/libc_nano.a;/usr/lib/arm-none-eabi/newlib/thumb/v7e-m+fp/hard/libm.a"
+  [qemu-system-arm]="CMD:qemu-system-arm"
+  [socat]="CMD:socat"
+  # headless browser for the report rendering test
+  [chromium]="CMD:chromium"
+)
+declare -A NEEDED=()
+for pkg in "${!RUN_NEEDED[@]}"; do NEEDED[$pkg]=${RUN_NEEDED[$pkg]}; done
+if [ "$mode" = test ]; then
+  for pkg in "${!TEST_NEEDED[@]}"; do NEEDED[$pkg]=${TEST_NEEDED[$pkg]}; done
+fi
 
 present() {  # present PKG -> 0 when every file of PKG is there
   local spec f
@@ -46,6 +77,10 @@ present() {  # present PKG -> 0 when every file of PKG is there
       local inc
       inc=$("$py" -c 'import sysconfig; print(sysconfig.get_paths()["include"])')
       [ -e "$inc/${spec#PYINCLUDE:}" ] || { MISSING_FILE="$inc/${spec#PYINCLUDE:}"; return 1; }
+      continue
+    fi
+    if [[ $spec == CMD:* ]]; then
+      command -v "${spec#CMD:}" >/dev/null || { MISSING_FILE="${spec#CMD:} on PATH"; return 1; }
       continue
     fi
     if [[ $spec == PYTHON:* ]]; then
@@ -62,6 +97,14 @@ missing=()
 for pkg in "${!NEEDED[@]}"; do
   present "$pkg" || missing+=("$pkg")
 done
+if [ "$check_only" = 1 ]; then
+  if [ ${#missing[@]} -gt 0 ]; then
+    echo "bootstrap --$mode: missing Debian packages: ${missing[*]}" >&2
+    exit 1
+  fi
+  echo "bootstrap --$mode: every package is present: $(printf '%s\n' "${!NEEDED[@]}" | sort | tr '\n' ' ')"
+  exit 0
+fi
 if [ ${#missing[@]} -gt 0 ]; then
   if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
     echo "bootstrap: installing ${missing[*]} with apt-get" >&2

@@ -75,3 +75,35 @@ def test_heartbeat_only_board_ends_hil_serve_with_exit_2_within_15_s(tmp_path):
     assert time.monotonic() - t0 < 15.0
     assert proc.returncode == 2, proc.stdout + proc.stderr
     assert "board sent only HEARTBEAT" in proc.stdout + proc.stderr
+
+
+def _sixstep_step_faults(link: str, periods: int = 400) -> list:
+    from hil.session.bench_session import BenchSession, SessionConfig
+    from hil.session.board_params import load_bench_profile
+
+    with BenchSession(load_bench_profile(None), SessionConfig(link=link, hold_cpu_latency=False)) as session:
+        session.send_command(enable=True, speed_source="encoder", speed_ref_rpm=1500)
+        session.run_periods(periods)
+        return list(session.faults)
+
+
+@pytest.mark.parametrize("link", [f"exec:{BUILD / 'sixstep'}?args=--overcurrent-a+1",
+                                  f"lib:{BUILD / 'libsixstep.so'}?args=--overcurrent-a%201"])
+def test_the_template_takes_args_over_exec_and_lib_alike(link):
+    """host/main.c hands its argv to the firmware's hil_fw_configure, as lib: hands args=:
+    a 1 A trip level trips the speed step's current; without args the step does not trip."""
+    from protocol.messages import FaultCode
+
+    faults = _sixstep_step_faults(link)
+    assert [f.code for f in faults][:1] == [FaultCode.OVERCURRENT]
+    assert faults[0].value > 1.0
+    assert _sixstep_step_faults(link.partition("?")[0]) == []
+
+
+def test_the_template_refuses_an_argument_it_does_not_know_naming_it():
+    from hil.session.bench_session import SessionError
+
+    with pytest.raises(SessionError) as err:
+        _sixstep_step_faults(f"exec:{BUILD / 'sixstep'}?args=--overcurrent+5", 1)
+    assert "status 2" in str(err.value) and "unknown argument" in str(err.value)
+    assert "--overcurrent" in str(err.value)

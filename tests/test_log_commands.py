@@ -135,7 +135,8 @@ def _read_csv(path):
 def test_export_one_topic_round_trips_exactly(run_log, tmp_path):
     out = log_export(run_log, ["/plant/truth"], tmp_path / "truth.csv", t0=0.1)
     header, rows = _read_csv(tmp_path / "truth.csv")
-    assert header == ["t_s", "log_time_ns", "speed_rpm", "torque_nm", "i_a"] == out["columns"]
+    assert header == ["t_s", "log_time_ns", "/plant/truth:speed_rpm", "/plant/truth:torque_nm",
+                      "/plant/truth:i_a"] == out["columns"]
     assert len(rows) == out["rows"] == N - 2000
     for row in rows[:50] + rows[-50:]:
         k = int(row[1]) // PERIOD_NS
@@ -168,7 +169,7 @@ def test_export_several_topics_merges_rows_in_time_order(run_log, tmp_path):
 def test_export_bytes_are_hex_and_errors_name_the_problem(run_log, tmp_path):
     log_export(run_log, ["/link/frames_in"], tmp_path / "frames.csv", t1=0.001)
     header, rows = _read_csv(tmp_path / "frames.csv")
-    assert header == ["t_s", "log_time_ns", "count", "data"]
+    assert header == ["t_s", "log_time_ns", "/link/frames_in:count", "/link/frames_in:data"]
     assert rows[0][2:] == ["20", "0102" * 20]
     with pytest.raises(LogCommandError, match="/plant/truth has no field 'nope'"):
         log_export(run_log, ["/plant/truth:nope"], tmp_path / "x.csv")
@@ -178,3 +179,21 @@ def test_export_bytes_are_hex_and_errors_name_the_problem(run_log, tmp_path):
         log_export(run_log, ["/plant/truth"], tmp_path / "x.csv", t0=float("nan"))
     with pytest.raises(FileNotFoundError, match="no_dir"):
         log_export(run_log, ["/plant/truth"], tmp_path / "no_dir" / "x.csv")
+
+
+def test_export_one_channel_with_its_own_t_s_field_names_each_column_once(tmp_path):
+    """A message with its own t_s field (the session's /plant/truth has one): exported alone,
+    the header holds t_s once and every field keeps its topic."""
+    path = tmp_path / "own_t.mcap"
+    with McapLog(path) as log:
+        truth = log.add_fixed_channel("/plant/truth", "hil.PlantTruth",
+                                      [("t_s", "double"), ("speed_rpm", "double")])
+        for k in range(10):
+            truth.write(k * PERIOD_NS, k * PERIOD_NS * 1e-9, 10.0 * k)
+    for channels in (["/plant/truth"], ["plant.t_s", "plant.speed_rpm"]):
+        log_export(path, channels, tmp_path / "one.csv")
+        header, rows = _read_csv(tmp_path / "one.csv")
+        assert header == ["t_s", "log_time_ns", "/plant/truth:t_s", "/plant/truth:speed_rpm"]
+        assert len(set(header)) == len(header)
+        assert [float(r[3]) for r in rows] == [10.0 * k for k in range(10)]
+        assert [float(r[2]) for r in rows] == [k * PERIOD_NS * 1e-9 for k in range(10)]

@@ -1,7 +1,9 @@
 """The ``hil`` command line.
 
 Exit codes: 0 every plan passed, 1 a plan failed (FAIL or MARGINAL-free FAIL,
-TIMEOUT), 2 an error (bad input, the bench or the board failed, ABORTED).
+TIMEOUT), 2 an error (bad input, the bench or the board failed, ABORTED). A SKIPPED plan
+(its link needs a program this machine lacks, e.g. qemu-system-arm; the reason names it)
+counts as neither: a run whose plans all passed or were SKIPPED exits 0.
 """
 from __future__ import annotations
 

@@ -89,14 +89,19 @@ class QemuBoardError(RuntimeError):
     """QEMU or the firmware build could not be started, or QEMU died."""
 
 
+class QemuToolMissing(QemuBoardError):
+    """A program QEMU runs need (qemu-system-arm, the Arm toolchain) is not on this machine:
+    the run cannot happen here, which is not a fault of the board or the bench."""
+
+
 def _require_tool(name: str) -> str:
     path = shutil.which(name)
     if path is None:
         package = _PACKAGES[name]
-        raise QemuBoardError(
+        raise QemuToolMissing(
             f"{name} not found on PATH: install the Debian package(s) {package} with "
             f"'sudo apt-get update && sudo apt-get install -y {package}' "
-            f"(scripts/bootstrap.sh does this when run as root)")
+            f"(scripts/bootstrap.sh --test does this when run as root)")
     return path
 
 

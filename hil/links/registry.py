@@ -52,6 +52,11 @@ LINK_CHOICES = ("stub", "stub-pty", "stub-can", "qemu", "exec:PATH[?args=...&tra
 STDERR_LINES = 10
 
 
+class LinkUnavailable(LinkError):
+    """The link needs a program this machine does not have (QEMU, the Arm toolchain): a plan
+    on it is SKIPPED with this reason, not an ERROR of the board or the bench."""
+
+
 @dataclass
 class BoardConnection:
     spec: str
@@ -254,7 +259,7 @@ def _stub_link(spec: str) -> BoardConnection:
 
 
 def _qemu_link(rest: str, spec: str, build: bool = False) -> BoardConnection:
-    from hil.links.qemu import QemuBoard, QemuBoardError
+    from hil.links.qemu import QemuBoard, QemuBoardError, QemuToolMissing
 
     if rest:
         target, options = _query(spec, rest, ("machine", "cpu"))
@@ -281,6 +286,8 @@ def _qemu_link(rest: str, spec: str, build: bool = False) -> BoardConnection:
     board.command = command
     try:
         board.start()
+    except QemuToolMissing as exc:
+        raise LinkUnavailable(f"link '{spec}': {exc}") from exc
     except (QemuBoardError, OSError) as exc:
         raise LinkError(f"link '{spec}': {exc}") from exc
     try:
@@ -320,6 +327,53 @@ def _alias(spec: str) -> BoardConnection | None:
     if spec == "qemu":
         return _qemu_link("", spec, build=True)
     return None
+
+
+# The options each built-in type takes, and the values of its `transport` (None: no transport).
+_OPTIONS: dict[str, tuple[tuple[str, ...], tuple[str, ...] | None]] = {
+    "exec": (("args", "transport"), ("serial", "slcan")),
+    "lib": (("args", "transport"), ("serial", "can")),
+    "qemu": (("machine", "cpu"), None),
+}
+
+
+def parse_link(spec: str, plugin_types: tuple[str, ...] = ()) -> tuple[str, str, dict[str, str]]:
+    """(type, target, options) of a link string, checked as connect() checks it but without
+    opening anything (no file, port or program needs to exist): LinkError names what is wrong.
+    plugin_types: entry-point type names to accept besides the installed ones.
+    The docs' examples are parsed with it (tests/test_doc_examples.py)."""
+    if spec in ("stub", "stub-pty", "stub-can", "qemu"):
+        return spec, "", {}
+    scheme, sep, rest = spec.partition(":")
+    if sep and scheme in _OPTIONS:
+        allowed, transports = _OPTIONS[scheme]
+        target, options = _query(spec, rest, allowed)
+        if transports is not None and options.get("transport", transports[0]) not in transports:
+            raise LinkError(f"link '{spec}': transport '{options['transport']}'; expected "
+                            f"{' or '.join(transports)}")
+        if "args" in options:
+            _args_option(spec, options)
+        return scheme, target, options
+    if sep and scheme == "serial":
+        target, _, query = rest.partition("?")
+        options = dict(parse_qsl(query, keep_blank_values=True))
+        if not target:
+            raise LinkError(f"link '{spec}': expected serial:PORT[?baud=N]")
+        if "baud" in options and not options["baud"].isdigit():
+            raise LinkError(f"link '{spec}': baud '{options['baud']}' is not an integer")
+        return scheme, target, options
+    if sep and scheme == "can":
+        head, _, query = rest.partition("?")
+        interface, _, channel = head.partition(":")
+        if not interface:
+            raise LinkError(f"link '{spec}': expected can:INTERFACE:CHANNEL[?bitrate=N]")
+        return scheme, head, dict(parse_qsl(query, keep_blank_values=True))
+    if sep and (scheme in plugin_types or scheme in entry_point_types()):
+        return scheme, rest, {}
+    if ("/" in spec and not sep) or "://" in spec:
+        return "serial", spec, {}
+    raise LinkError(f"unknown link '{spec}'; expected one of: {', '.join(LINK_CHOICES)}"
+                    + _plugins_hint())
 
 
 def entry_point_types() -> dict[str, Any]:

@@ -191,9 +191,10 @@ def log_export(path: str | Path, channels: list[str], out_csv: str | Path,
     """CSV of the chosen channels over [t0, t1] s.
 
     Each item of `channels` is a topic (all its fields) or a signal (one field). Columns:
-    ``t_s, log_time_ns`` then the fields; with several topics also ``topic``, and field
-    columns are named ``topic:field``; rows of all topics are merged in log-time order,
-    each row filling only its own topic's columns.
+    ``t_s, log_time_ns`` (the log's time) then the fields, always named ``topic:field`` (a
+    message's own ``t_s`` field is ``/plant/truth:t_s``, never a second ``t_s`` column); with
+    several topics also ``topic``, and rows of all topics are merged in log-time order, each
+    row filling only its own topic's columns.
     """
     if not channels:
         raise LogCommandError("no channel to export: name at least one topic (e.g. /plant/truth)")
@@ -217,7 +218,7 @@ def log_export(path: str | Path, channels: list[str], out_csv: str | Path,
         names = list(td.fields) if names is None else names
         for name in names:
             _field(data, topic, name, f"{topic}:{name}")
-        header = [f"{topic}:{n}" if multi else n for n in names]
+        header = [f"{topic}:{n}" for n in names]
         offset = len(columns)
         columns += header
         blocks.append((topic, td, names, offset))

@@ -6,7 +6,8 @@ Step:   PASS, FAIL (a check step that failed), ERROR, TIMEOUT (a wait_until
         whose condition did not hold in time), SKIPPED (not reached).
 Plan:   PASS, FAIL (a check failed), ERROR (the bench or the board failed, or a
         check could not be computed), TIMEOUT (a step's own time limit or the
-        plan's wall-clock budget), ABORTED (Ctrl-C), each with its reason.
+        plan's wall-clock budget), ABORTED (Ctrl-C), SKIPPED (the plan's link needs a
+        program this machine lacks, such as qemu-system-arm: nothing ran), each with its reason.
 
 A plan with MARGINAL checks and no failure is PASS; the report counts them.
 The run record (`PlanResult.to_json`) is plain data for other tools.
@@ -169,14 +170,17 @@ class PlanResult:
 def plan_outcome(steps: tuple[StepResult, ...] | list[StepResult],
                  checks: tuple[CheckResult, ...] | list[CheckResult],
                  error: str | None = None, aborted: str | None = None,
-                 timeout: str | None = None) -> tuple[Outcome, str]:
+                 timeout: str | None = None, skipped: str | None = None) -> tuple[Outcome, str]:
     """The plan's outcome and reason from its steps and checks.
 
-    Precedence: ABORTED (the user stopped it) > ERROR (bench, board or an
-    uncomputable check) > TIMEOUT > FAIL > PASS.
+    Precedence: ABORTED (the user stopped it) > SKIPPED (its link could not exist on this
+    machine, so nothing ran) > ERROR (bench, board or an uncomputable check) > TIMEOUT >
+    FAIL > PASS.
     """
     if aborted is not None:
         return Outcome.ABORTED, aborted
+    if skipped is not None:
+        return Outcome.SKIPPED, skipped
     if error is not None:
         return Outcome.ERROR, error
     errored = [c for c in checks if c.outcome is Outcome.ERROR]

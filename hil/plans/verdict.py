@@ -4,7 +4,8 @@ Check:  PASS, MARGINAL (passes, close to a limit), FAIL, ERROR (could not be
         computed), SKIPPED (never reached), INFO (a `role: finding` check: the
         value is recorded and cannot fail the plan).
 Step:   PASS, FAIL, ERROR, TIMEOUT, SKIPPED.
-Plan:   PASS, FAIL, ERROR, TIMEOUT, ABORTED.
+Plan:   PASS, FAIL, ERROR, TIMEOUT, ABORTED, SKIPPED (the plan's link needs a program this
+        machine lacks, e.g. QEMU: nothing ran; `hil run` exits 0 for it).
 """
 from __future__ import annotations
 
@@ -33,7 +34,8 @@ class Outcome(str, Enum):
 CHECK_OUTCOMES = (Outcome.PASS, Outcome.MARGINAL, Outcome.FAIL, Outcome.ERROR, Outcome.SKIPPED,
                   Outcome.INFO)
 STEP_OUTCOMES = (Outcome.PASS, Outcome.FAIL, Outcome.ERROR, Outcome.TIMEOUT, Outcome.SKIPPED)
-PLAN_OUTCOMES = (Outcome.PASS, Outcome.FAIL, Outcome.ERROR, Outcome.TIMEOUT, Outcome.ABORTED)
+PLAN_OUTCOMES = (Outcome.PASS, Outcome.FAIL, Outcome.ERROR, Outcome.TIMEOUT, Outcome.ABORTED,
+                 Outcome.SKIPPED)
 
 
 __all__ = ["Outcome", "CHECK_OUTCOMES", "STEP_OUTCOMES", "PLAN_OUTCOMES"]

@@ -149,6 +149,8 @@ class PlanItem(_HilItem):
         result = self.parent.result(self.profile)
         self.user_properties.append(("outcome", result.outcome.value))
         self.user_properties.append(("reason", result.reason))
+        if result.outcome is Outcome.SKIPPED:       # its link cannot run on this machine
+            pytest.skip(result.reason)
         if result.outcome in (Outcome.ERROR, Outcome.TIMEOUT, Outcome.ABORTED):
             raise HilCheckFailure(f"{result.source}: plan '{result.plan_name}' ended "
                                   f"{result.outcome.value}: {result.reason}")
@@ -163,6 +165,8 @@ class CheckItem(_HilItem):
 
     def runtest(self) -> None:
         result = self.parent.result(self.profile)
+        if result.outcome is Outcome.SKIPPED:
+            pytest.skip(result.reason)
         check = _find(result, self.check_name)
         if check is None:
             raise HilCheckFailure(f"{result.source}:{self.line}: check '{self.check_name}' has no "

@@ -35,6 +35,7 @@ from hil.plans.format import (
 from hil.logs.recorder import SENSOR_FIELDS, TELEMETRY_FIELDS, COMMAND_FIELDS
 from hil.reports.html import slug, write_reports, write_summary
 from hil.session.bench_session import BenchSession, SessionConfig, SessionError
+from hil.links.registry import LinkUnavailable
 from hil.session.bench_session import _fault_text as fault_text    # SPEC 2.9's wording
 from hil.session.board_state import fault_name
 from hil.session.control_inputs import ControlLimits
@@ -283,7 +284,7 @@ def _run(plan: Plan, opts: RunOptions) -> tuple[PlanResult, SignalSet]:
     started = _dt.datetime.now(_dt.timezone.utc)
     wall0 = time.monotonic()
     state = _RunState()
-    error = aborted = timeout = None
+    error = aborted = timeout = skipped = None
     session = None
     port = None
     try:
@@ -323,6 +324,8 @@ def _run(plan: Plan, opts: RunOptions) -> tuple[PlanResult, SignalSet]:
         aborted = "aborted by the user (Ctrl-C)"
     except PlanTimeout as exc:
         timeout = str(exc)
+    except LinkUnavailable as exc:      # e.g. no qemu-system-arm here: SKIPPED, with the reason
+        skipped = str(exc)
     except (SessionError, ConfigError, OSError, ValueError, RuntimeError) as exc:
         error = str(exc)
         if session is not None and state.steps and session.error is None:
@@ -331,7 +334,7 @@ def _run(plan: Plan, opts: RunOptions) -> tuple[PlanResult, SignalSet]:
         if port is not None:
             port.stop()
         if session is not None:
-            session.close(reason=aborted or error or timeout)
+            session.close(reason=aborted or skipped or error or timeout)
     sim_end = session.plant.t_s if session is not None else 0.0
     signals = SignalSet.from_arrays(session.recorder.arrays()) if session is not None else SignalSet()
     checks: list[CheckResult] = []
@@ -351,12 +354,13 @@ def _run(plan: Plan, opts: RunOptions) -> tuple[PlanResult, SignalSet]:
                        Outcome.FAIL: Outcome.FAIL}.get(match.outcome, Outcome.ERROR)
             s = StepResult(s.index, s.kind, outcome, s.line, s.start_s, s.end_s, match.message)
         steps.append(s)
-    why = aborted or error or timeout
+    why = aborted or skipped or error or timeout
     if why is not None:
         rest_steps, rest_checks = skipped_remainder(plan, steps, checks, why)
         steps += rest_steps
         checks += rest_checks
-    outcome, reason = plan_outcome(steps, checks, error=error, aborted=aborted, timeout=timeout)
+    outcome, reason = plan_outcome(steps, checks, error=error, aborted=aborted, timeout=timeout,
+                                   skipped=skipped)
     extra: dict[str, Any] = {}
     if session is not None:
         extra["board"] = session.board_name
@@ -649,6 +653,8 @@ def run_command(args) -> int:
                 break
             if result.outcome is Outcome.ERROR:
                 exit_code = 2
+            elif result.outcome is Outcome.SKIPPED:
+                pass                           # could not run here (its reason says why): exit 0
             elif not result.outcome.passed and exit_code == 0:
                 exit_code = 1
     finally:

@@ -1,14 +1,17 @@
 /*
  * sixstep: the example firmware as a host process speaking the serial protocol
  * on stdin/stdout (raw bytes: COBS frames and their 0x00 delimiters). The bench
- * puts it on a pseudo-terminal (link `exec:`); by hand:
+ * puts it on a pseudo-terminal (link `exec:build/sixstep`).
  *
- *   socat PTY,link=/tmp/sixstep,raw,echo=0 EXEC:build/sixstep
- *   hil run plans/01_speed_step.yaml --link serial:/tmp/sixstep
+ * The arguments are the firmware's (hil_fw_configure in src/firmware.c), exactly
+ * as `lib:` hands them over from its `args=` option, so
+ * `exec:build/sixstep?args=...` and `lib:build/libsixstep.so?args=...` configure
+ * the board alike, and a copy of this template adds its options in firmware.c.
  *
  * Exits 0 on end of input, hang-up or SHUTDOWN; 1 on an I/O error (the reason
- * on stderr); 2 on a usage error. The firmware itself is reached only through
- * the public ABI (protocol/c/hil_fw_abi.h), as the shared library is.
+ * on stderr); 2 on a usage error (arguments the firmware refuses). The firmware
+ * itself is reached only through the public ABI (protocol/c/hil_fw_abi.h), as
+ * the shared library is.
  */
 #define _DEFAULT_SOURCE /* cfmakeraw */
 #include <errno.h>
@@ -46,14 +49,9 @@ static int write_all(const uint8_t *p, size_t n)
 
 int main(int argc, char **argv)
 {
-    for (int i = 1; i < argc; ++i) {
-        if (strcmp(argv[i], "--version") == 0) {
-            printf("%s (firmware ABI %u)\n", hil_fw_name(), (unsigned)hil_fw_abi_version());
-            return 0;
-        }
-        fprintf(stderr, "sixstep: unexpected argument '%s'\nusage: sixstep [--version]  "
-                        "(the serial protocol on stdin/stdout)\n", argv[i]);
-        return 2;
+    if (argc == 2 && strcmp(argv[1], "--version") == 0) {
+        printf("%s (firmware ABI %u)\n", hil_fw_name(), (unsigned)hil_fw_abi_version());
+        return 0;
     }
     signal(SIGPIPE, SIG_IGN); /* a closed reader shows up as EPIPE */
     if (isatty(STDIN_FILENO)) {
@@ -70,6 +68,16 @@ int main(int argc, char **argv)
         fprintf(stderr, "sixstep: cannot create the firmware instance (%zu bytes)\n", hil_fw_instance_size());
         free(mem);
         return 1;
+    }
+    char why[256] = {0};
+    int refused = hil_fw_configure(fw, argc - 1, (const char *const *)(argv + 1), why, sizeof why);
+    if (refused != 0) {
+        fprintf(stderr, "sixstep: arguments refused (status %d): %s\n"
+                        "usage: sixstep [--version | FIRMWARE ARGUMENTS]  "
+                        "(the serial protocol on stdin/stdout)\n", refused, why);
+        hil_fw_destroy(fw);
+        free(mem);
+        return 2;
     }
     static uint8_t rx[4096];
     static uint8_t tx[4096];

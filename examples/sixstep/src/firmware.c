@@ -467,6 +467,61 @@ static void dispatch(sixstep_fw *f, const hil_msg *in)
     }
 }
 
+/* ---- the firmware's arguments (hil_fw_configure) ------------------------ */
+
+/* A decimal number without exponent ("5", "12.5"); 0 when `text` is not one. No strtof:
+ * the Cortex-M4F image links no locale-aware C library parsing. */
+static int parse_decimal(const char *text, float *value)
+{
+    float v = 0.0f, scale = 1.0f;
+    int digits = 0, fraction = 0;
+    for (; *text != '\0'; ++text) {
+        if (*text == '.' && !fraction) {
+            fraction = 1;
+        } else if (*text >= '0' && *text <= '9' && digits < 9) {
+            v = 10.0f * v + (float)(*text - '0');
+            scale *= fraction ? 10.0f : 1.0f;
+            ++digits;
+        } else {
+            return 0;
+        }
+    }
+    *value = v / scale;
+    return digits > 0;
+}
+
+static void copy_reason(char *why, size_t why_cap, const char *reason, const char *arg)
+{
+    size_t n = 0;
+    for (const char *p = reason; *p != '\0' && n + 1u < why_cap; ++p) why[n++] = *p;
+    for (const char *p = arg; *p != '\0' && n + 1u < why_cap; ++p) why[n++] = *p;
+    why[n] = '\0';
+}
+
+/* The board's start-up settings, from `exec:PATH?args=...` (host/main.c hands its argv
+ * here) or `lib:PATH.so?args=...` alike. Copying this template, add your options here:
+ * host/main.c stays as it is. --overcurrent-a A: the phase-current trip level until the
+ * bench sets parameter 41, 0 < A <= 50. */
+int hil_fw_configure(void *fw, int argc, const char *const *argv, char *why, size_t why_cap)
+{
+    sixstep_fw *f = (sixstep_fw *)fw;
+    for (int k = 0; k < argc; ++k) {
+        float v;
+        if (strcmp(argv[k], "--overcurrent-a") == 0 && k + 1 < argc) {
+            if (!parse_decimal(argv[k + 1], &v) || !(v > 0.0f && v <= 50.0f)) {
+                copy_reason(why, why_cap, "--overcurrent-a wants a current in A, 0 < A <= 50; got ", argv[k + 1]);
+                return 2;
+            }
+            f->overcurrent_a = v;
+            ++k;
+        } else {
+            copy_reason(why, why_cap, "unknown argument (known: --overcurrent-a A): ", argv[k]);
+            return 1;
+        }
+    }
+    return 0;
+}
+
 /* ---- the ABI (hil_fw_abi.h) -------------------------------------------- */
 
 uint32_t hil_fw_abi_version(void) { return HIL_FW_ABI_VERSION; }
