@@ -239,3 +239,24 @@ def test_log_rate_warning(tmp_path):
     small = tmp_path / "small.mcap"
     small.write_bytes(bytes(LOG_MEASURE_BYTES - 1))
     assert LogRate(small, 50e-6).warning(10, 1e-6, "fast") is None   # too little to measure
+
+
+def test_serve_stopped_by_ctrl_c_says_nothing_of_a_log_it_did_not_write(monkeypatch, capsys):
+    """Ctrl-C (here: the second chunk interrupted) still prints the summary; no 'log closed'
+    without --log."""
+    from hil.session.bench_session import BenchSession
+
+    run_periods = BenchSession.run_periods
+    calls = []
+
+    def interrupted(self, count, stop=None):
+        calls.append(count)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return run_periods(self, count, stop)
+
+    monkeypatch.setattr(BenchSession, "run_periods", interrupted)
+    assert main(["serve", "--modbus", "off"]) == 0
+    err = capsys.readouterr().err
+    assert "stopping (Ctrl-C): plant safe-stated" in err and "log" not in err
+    assert f"{calls[0]} periods (" in err and "board FAULTs: none" in err
