@@ -149,7 +149,8 @@ def test_a_bad_profile_value_is_named_before_any_run(tmp_path, capsys):
                                       "steps:\n  - run: {duration_s: 0.001}\n")
     assert main(["plans", str(plans)]) == 2
     out = capsys.readouterr().out
-    assert "INVALID" in out and "pole_pairs" in out and "bad.yaml" in out
+    assert "INVALID" in out and "bad.yaml:" in out and "key 'motor.pole_pairs'" in out
+    assert "b_bad.yaml" in out            # the plan that runs on it
     out_dir = tmp_path / "out"
     assert main(["run", str(plans), "--out", str(out_dir), "--no-progress"]) == 2
     out, err = capsys.readouterr()

@@ -159,7 +159,14 @@ def validate_run(plan: Plan, ref: ProfileRef, link: str | None = None, board=Non
     """What a run of `plan` on `ref` needs, checked without running anything: the profile
     loads with the plan's overrides, the board takes every param_set, the commands and loads
     lie within the profile's ranges. ConfigError naming the file, line and key."""
-    profile = profile_for(plan, ref)
+    try:
+        profile = profile_for(plan, ref)
+    except ConfigError as exc:
+        if exc.source == str(plan.source_path):
+            raise
+        # the profile's own file, line and key, and the plan that runs on it
+        raise ConfigError(f"{exc.message} (profile '{ref.label}' of plan "
+                          f"{plan.source_path})", exc.source, exc.line, exc.key) from None
     check_plan_board(plan, board_for(plan, link, board))
     check_control_inputs(plan.steps, ControlLimits.from_profile(profile), str(plan.source_path))
 
