@@ -57,8 +57,9 @@ class BoardTripped(Exception):
 class TripWatch:
     """Board FAULTs and shoot-throughs since the plan began, against what the plan expects.
 
-    A plan that has injected a fault (a `fault` step) or says `expect_fault: true` expects the
-    board may trip: its checks judge the trip (ctrl.fault_code, ctrl.state). Any other plan
+    A run in which a fault has been injected (a plan's `fault` step, the Modbus fault bits, the
+    Python API: hil/faults/injector.py) or whose plan says `expect_fault: true` expects the
+    board may trip: its checks judge the trip (ctrl.fault_code, ctrl.state). Any other run
     ends at the first trip; the step running then ends at once."""
 
     def __init__(self, session: BenchSession, expected: bool = False):
@@ -68,10 +69,18 @@ class TripWatch:
         self._shoot_throughs = session.shoot_throughs
 
     def __call__(self) -> bool:
-        """True when the board has tripped and the plan does not expect it."""
+        """True when the board has tripped and the run does not expect it (every period: the
+        counts first, the injector's history only after a trip)."""
         s = self.session
-        return not self.expected and (len(s.faults) > self._faults
-                                      or s.shoot_throughs > self._shoot_throughs)
+        if len(s.faults) == self._faults and s.shoot_throughs == self._shoot_throughs:
+            return False
+        return not self._expected_now()
+
+    def _expected_now(self) -> bool:
+        injector = self.session.fault_injector
+        if not self.expected and injector is not None:
+            self.expected = any(r["action"] == "inject" for r in injector.history)
+        return self.expected
 
     def cause(self) -> str:
         """The first trip in words: 'board FAULT 1 OVERCURRENT, value 20.09 A at period 14 ...'."""
@@ -519,8 +528,6 @@ def _execute(plan: Plan, session: BenchSession, stimuli: Stimuli, state: _RunSta
                 state.steps.append(StepResult(step.index, step.kind, Outcome.ERROR, step.line,
                                               t_start, session.plant.t_s, str(exc)))
             raise
-        if isinstance(step, FaultStep):
-            trips.expected = True         # the board may trip now: the plan's checks judge it
         state.steps.append(StepResult(step.index, step.kind, outcome, step.line, t_start,
                                       session.plant.t_s, message))
 
