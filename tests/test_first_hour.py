@@ -261,3 +261,43 @@ def test_serve_stopped_by_ctrl_c_says_nothing_of_a_log_it_did_not_write(monkeypa
     err = capsys.readouterr().err
     assert "stopping (Ctrl-C): plant safe-stated" in err and "log" not in err
     assert f"{calls[0]} periods (" in err and "board FAULTs: none" in err
+
+
+class _FakeSession:
+    """What TripWatch reads of a session: its FAULTs, shoot-throughs, events and injector."""
+
+    def __init__(self):
+        self.faults, self.shoot_throughs, self.events = [], 0, []
+        self.period_s, self.fault_injector = 50e-6, None
+
+
+def test_a_shoot_through_is_a_trip_named_by_its_gates():
+    from hil.run.runner import BoardTripped, TripWatch
+
+    session = _FakeSession()
+    watch = TripWatch(session)
+    assert not watch()
+    session.shoot_throughs = 1
+    session.events.append((0.001, "shoot_through", {"period": 20, "gates": 0x03, "legs": ["A"]}))
+    assert watch()
+    with pytest.raises(BoardTripped, match=r"step 2 \(run, line 5\): the board tripped: period 20 "
+                                           r"\(t = 0\.001 s\): shoot-through, GATES 0x03 turns on "
+                                           r"both switches of leg A"):
+        watch.check("step 2 (run, line 5)")
+    # an injected fault (any source) makes a trip the plan's to judge
+    session.fault_injector = type("Injector", (), {"history": [{"action": "inject"}]})()
+    assert not watch()
+    expecting = _FakeSession()                  # expect_fault: true
+    watch = TripWatch(expecting, expected=True)
+    expecting.faults.append(object())
+    assert not watch()
+
+
+def test_a_trip_is_the_plans_reason_before_its_checks():
+    from hil.plans.outcome import CheckResult, plan_outcome
+
+    bad = CheckResult("b", "bound", Outcome.FAIL, 9.0, "A", None, "")
+    err = CheckResult("c", "bound", Outcome.ERROR, None, "A", None, "no data")
+    trip = "step 3 (run, line 6): the board tripped: board FAULT 1 OVERCURRENT"
+    assert plan_outcome([], [bad, err], tripped=trip) == (Outcome.FAIL, trip)
+    assert plan_outcome([], [bad], tripped=trip, error="link failed")[0] is Outcome.ERROR
