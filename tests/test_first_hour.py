@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import shutil
+import sys
 from pathlib import Path
 
 import pytest
@@ -178,8 +179,17 @@ def test_check_link_hints(link, hint):
     with pytest.raises(LinkError, match=f"did you mean '{hint}'"):
         check_link(link)
     for good in ("stub", "stub-pty", "qemu", "serial:/dev/ttyUSB0", "can:socketcan:vcan0",
-                 "/dev/ttyACM0"):
+                 "/dev/ttyACM0", f"exec:{sys.executable}?args=-V"):
         check_link(good)
+
+
+def test_check_link_names_a_missing_file_and_a_bad_option(tmp_path):
+    from hil.links.registry import LinkError, check_link
+
+    with pytest.raises(LinkError, match="file '.*nothing.so' does not exist"):
+        check_link(f"lib:{tmp_path / 'nothing.so'}")
+    with pytest.raises(LinkError, match="did you mean 'args'"):
+        check_link(f"exec:{sys.executable}?arg=-V")
 
 
 def test_output_folder_of_a_profile_path_is_its_stem(tmp_path):

@@ -371,7 +371,13 @@ def check_link(spec: str) -> None:
     with a did-you-mean otherwise (a typo in --link is said once, before any plan runs)."""
     if spec in _ALIASES:
         return
-    scheme, sep, _rest = spec.partition(":")
+    scheme, sep, rest = spec.partition(":")
+    if sep and scheme in _FILE_OPTIONS:
+        # the file a link runs or loads, and its options: checked here as connect() would
+        target, _options = _query(spec, rest, _FILE_OPTIONS[scheme])
+        if not Path(target).is_file():
+            raise LinkError(f"link '{spec}': file '{target}' does not exist")
+        return
     if sep and (scheme in BUILTIN_TYPES or scheme in entry_point_types()):
         return
     if ("/" in spec and not sep) or "://" in spec:
@@ -388,6 +394,9 @@ def check_link(spec: str) -> None:
 
 
 _ALIASES = ("stub", "stub-pty", "stub-can", "qemu")
+#: link types naming a file (an executable, a library, an image) -> the options they take
+_FILE_OPTIONS = {"exec": ("args", "transport"), "lib": ("args", "transport"),
+                 "qemu": ("machine", "cpu")}
 
 
 def _plugins_hint() -> str:
