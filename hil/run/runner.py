@@ -83,7 +83,8 @@ class TripWatch:
         return self.expected
 
     def cause(self) -> str:
-        """The first trip in words: 'board FAULT 1 OVERCURRENT, value 20.09 A at period 14 ...'."""
+        """The first trip in words: 'period 14 (t = 0.0007 s): board FAULT 1 OVERCURRENT,
+        value 20.09 A' (SPEC 2.9's wording, as the session's warning)."""
         s = self.session
         if len(s.faults) > self._faults:
             return fault_text(s.faults[self._faults], s.period_s)
