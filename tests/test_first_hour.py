@@ -20,6 +20,8 @@ from hil.plans.format import ProfileRef, load_plan, parse_plan
 from hil.plans.outcome import Outcome
 from hil.run.runner import plan_dir_name, profile_for, run_plan
 
+pytest_plugins = ["pytester"]
+
 REPO = Path(__file__).resolve().parents[1]
 PAPER_PROFILE = REPO / "plant_rt" / "profiles" / "paper.yaml"
 
@@ -72,6 +74,18 @@ def test_board_fault_ends_the_step_at_once_and_names_the_cause(tmp_path, wait, k
     # the skipped check's signal is drawn as recorded up to the trip
     checks = html[html.index("Check windows"):]
     assert "data:image/svg+xml;base64," in checks[:checks.index("<h2>", 10)]
+
+
+def test_pytest_plugin_fails_the_plan_item_of_a_tripped_plan(pytester, monkeypatch):
+    """`pytest test_plans/`: the plan item says the board tripped (not only its skipped checks)."""
+    monkeypatch.setenv("PYTEST_DISABLE_PLUGIN_AUTOLOAD", "1")
+    plans = pytester.mkdir("test_plans")
+    (plans / "trip.yaml").write_text(TRIPPING.format(wait=RUN_STEP))
+    result = pytester.runpytest("test_plans", "-p", "hil.run.pytest_plugin",
+                                "-p", "no:cacheprovider")
+    result.assert_outcomes(failed=2)                 # the plan item and its one check
+    result.stdout.fnmatch_lines(["*plan 'trips-on-overcurrent' ended FAIL: step 3 (run, line 6): "
+                                 "the board tripped*OVERCURRENT*"])
 
 
 def test_expected_fault_lets_the_checks_judge_the_trip(tmp_path):
