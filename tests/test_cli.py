@@ -58,8 +58,9 @@ def test_unknown_link_is_an_error_naming_it(tmp_path, capsys):
     code = hil_main(["run", str(_plan(tmp_path, 1)), "--link", "bogus-link", "--out",
                      str(tmp_path / "out"), "--no-progress"])
     assert code == 2
-    record = json.loads((tmp_path / "out" / "short-spin" / "result.json").read_text())
-    assert record["outcome"] == "ERROR" and "bogus-link" in record["reason"]
+    # said once, before any plan runs (hil.links.registry.check_link): no run, no result
+    assert "unknown link 'bogus-link'" in capsys.readouterr().err
+    assert not (tmp_path / "out" / "short-spin").exists()
 
 
 def test_unwritable_out_directory_is_refused_before_running(tmp_path, capsys):

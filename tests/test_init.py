@@ -218,15 +218,17 @@ def test_generated_project_passes_on_the_stub_for_any_motor(tmp_path, motor):
 def test_board_option_overrides_the_plans_board(tmp_path):
     """--board replaces the board the plans name (how a user runs them on their firmware): with
     boards/my-firmware.yaml, a SPEC board, the stub keeps its Table 1 defaults on the hub
-    motor and does not even reach the half speed the plan starts from; the same plan passes
-    with the board file the plans name (test_generated_project_passes_on_the_stub_for_any_motor)."""
+    motor and trips on overcurrent before it reaches the half speed the plan starts from (the
+    plan FAILs naming the trip); the same plan passes with the board file the plans name
+    (test_generated_project_passes_on_the_stub_for_any_motor)."""
     options, _ = MOTORS["ebike-hub"]
     project = tmp_path / "hub"
     assert hil_main(["init", str(project), *options]) == 0
     [record] = _run_plans(project, ["01_speed_step"], tmp_path / "out",
                           "--board", str(project / "boards" / "my-firmware.yaml"))
     assert record["extra"]["board_file"]["name"] == "my firmware"
-    assert record["outcome"] == "TIMEOUT", record.get("reason")
+    assert record["outcome"] == "FAIL", record.get("reason")
+    assert "board FAULT 1 OVERCURRENT" in record["reason"]
 
 
 @pytest.mark.parametrize("edit", ["pole_pairs", "inertia"])

@@ -142,13 +142,13 @@ steps:
 """)
     t = profile_for(plan).control_period_s
     result, _ = run_plan(plan)
-    assert result.outcome is Outcome.ERROR
+    assert result.outcome is Outcome.FAIL       # a trip is a verdict on the board
     assert "FAULT 1 OVERCURRENT" in result.reason and "wait_ready, line 7" in result.reason
     fault_period = result.extra["board_faults"][0]["period"]
     # the FAULT follows the answer of the tripping period and is read with the next one
     assert result.sim_duration_s <= (fault_period + 2) * t + 1e-12
     assert [c["name"] for c in result.extra["board_states"]] == ["STARTING", "FAULT"]
-    assert [s.outcome for s in result.steps][-2:] == [Outcome.ERROR, Outcome.SKIPPED]
+    assert [s.outcome for s in result.steps][-2:] == [Outcome.FAIL, Outcome.SKIPPED]
 
 
 def test_live_step_signals_feed_wait_until():

@@ -63,6 +63,9 @@ class _ArgumentParser(argparse.ArgumentParser):
 def _parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     parser = _ArgumentParser(
         prog="hil", description="hil-bench: hardware-in-the-loop test bench for motor-controller boards.")
+    from hil import __version__
+
+    parser.add_argument("--version", action="version", version=f"hil {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     words = sys.argv[1:] if argv is None else argv
@@ -285,17 +288,19 @@ def _log_command(args) -> int:
 
 
 def _plans_command(args) -> int:
+    from hil.links.registry import LinkError
     from hil.plans.format import load_plan
-    from hil.run.runner import board_for, check_plan_board, expand_plan_paths
+    from hil.run.runner import expand_plan_paths, plan_runs, validate_runs
     from configfile.source import ConfigError
 
     worst = EXIT_PASS
     for path in expand_plan_paths(args.paths):
         try:
             plan = load_plan(path)
-            # the board the plan runs on by default (its `board:`, else its link's)
-            check_plan_board(plan, board_for(plan, plan.link))
-        except ConfigError as exc:
+            # as `hil run` would run it: each of its profiles with its overrides, the board it
+            # runs on by default (its `board:`, else its link's) and its link
+            validate_runs(plan_runs([plan]))
+        except (ConfigError, LinkError) as exc:
             print(f"INVALID  {exc}")
             worst = EXIT_ERROR
             continue

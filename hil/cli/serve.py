@@ -119,6 +119,73 @@ class _StatusLine:
               end="", file=sys.stderr, flush=True)
 
 
+#: `--log` at fast pace: a rate above this is worth a warning (a minute is then gigabytes)
+LOG_WARN_BYTES_PER_S = 10e6
+#: the log size the rate is measured over (a few 64 KiB chunks: milliseconds at fast pace)
+LOG_MEASURE_BYTES = 256 * 1024
+
+
+class LogRate:
+    """How fast `--log` grows: bytes a period (measured on the file, whose chunks are written
+    as they fill) times the periods run a wall second. Says once, early, when that is more than
+    LOG_WARN_BYTES_PER_S, with the rate and how to lower it."""
+
+    def __init__(self, path, period_s: float):
+        self.path = path
+        self.period_s = period_s
+        self.warned = False
+
+    def size(self) -> int:
+        import os
+
+        try:
+            return os.path.getsize(self.path)
+        except OSError:
+            return 0
+
+    def warning(self, ran: int, wall_s: float, pace: str) -> str | None:
+        """The warning to print now, or None (once: later calls return None)."""
+        if self.warned or pace != "fast" or ran <= 0 or wall_s <= 0:
+            return None
+        size = self.size()
+        if size < LOG_MEASURE_BYTES:
+            return None
+        bytes_per_period = size / ran
+        periods_per_s = ran / wall_s
+        rate = bytes_per_period * periods_per_s
+        if rate <= LOG_WARN_BYTES_PER_S:
+            return None
+        self.warned = True
+        realtime = bytes_per_period / self.period_s
+        return (f"hil serve: warning: --log {self.path} at --pace fast writes {rate / 1e6:.0f} MB "
+                f"a second ({bytes_per_period:.0f} bytes a period, {periods_per_s:.0f} periods a "
+                f"second): {rate * 60 / 1e9:.1f} GB a minute. To lower it: --pace realtime "
+                f"({realtime / 1e6:.1f} MB a second), --duration SECONDS to stop early, "
+                f"--log-compression zstd (smaller files), or leave out --log")
+
+
+def summary(session, ran: int, period_s: float, wall_s: float) -> str:
+    """What `hil serve` did, on every exit: periods, the plant's last speed, torque and DC
+    link, the board's FAULTs (the first named) and the injected faults."""
+    from plant_rt import TRUTH_FIELDS
+
+    from hil.session.bench_session import _fault_text as fault_text
+
+    parts = [f"{ran} periods ({ran * period_s:.3f} s simulated) in {wall_s:.2f} s wall"]
+    row = session.recorder.latest_row("truth") if session is not None else None
+    if row is not None:
+        f = {name: i for i, name in enumerate(TRUTH_FIELDS)}
+        parts.append(f"speed {row[f['speed_rpm']]:.1f} rpm, torque {row[f['torque_nm']]:.3f} N m, "
+                     f"DC link {row[f['v_dc']]:.1f} V")
+    if session is not None:
+        faults = session.faults
+        parts.append("board FAULTs: none" if not faults else
+                     f"board FAULTs: {len(faults)}, the first {fault_text(faults[0], period_s)}")
+        parts.append(f"injected fault bits 0x{session.fault_bits:x}" if session.fault_bits
+                     else "no injected faults")
+    return "hil serve: " + "; ".join(parts)
+
+
 def _serve(args, profile, config, mailbox, port, live, chunk, total, pace: str) -> int:
     from hil.faults.injector import apply_fault_bits
 
@@ -138,6 +205,7 @@ def _serve(args, profile, config, mailbox, port, live, chunk, total, pace: str) 
         started = time.monotonic()
         pacer = Pacer(pace, profile.control_period_s)
         status = _StatusLine(session) if sys.stderr.isatty() else None
+        log_rate = LogRate(args.log, profile.control_period_s) if args.log is not None else None
         from hil.run.console import EventConsole
 
         # Notable events as they happen, rate-limited (hil/run/console.py); on a terminal the
@@ -156,18 +224,27 @@ def _serve(args, profile, config, mailbox, port, live, chunk, total, pace: str) 
                         print(f"hil serve: live: {error}", file=sys.stderr)
                     pacer.mode = live.pace                  # the viewer may change it
                 ran += session.run_periods(n)
+                if log_rate is not None:
+                    warning = log_rate.warning(ran, time.monotonic() - started, pacer.mode)
+                    if warning is not None:
+                        print(("\r\033[K" if status is not None else "") + warning,
+                              file=sys.stderr, flush=True)
                 wait_s = pacer.wait_s(ran, time.monotonic())
                 if wait_s > 0:
                     time.sleep(wait_s)
         except KeyboardInterrupt:
-            print("hil serve: stopping (Ctrl-C): plant safe-stated, log closed", file=sys.stderr)
+            closed = ", log closed" if args.log is not None else ""
+            print(f"hil serve: stopping (Ctrl-C): plant safe-stated{closed}", file=sys.stderr)
         finally:
             console.close()
             if port is not None:
                 port.stop()
-        wall = time.monotonic() - started
-        if status is not None:
-            print(file=sys.stderr)             # leave the status line
-        print(f"hil serve: {ran} periods ({ran * profile.control_period_s:.3f} s simulated) "
-              f"in {wall:.2f} s wall", file=sys.stderr)
+            if status is not None:
+                print(file=sys.stderr)             # leave the status line
+            # on every exit, a terminal or not, an error or not
+            print(summary(session, ran, profile.control_period_s, time.monotonic() - started),
+                  file=sys.stderr, flush=True)
+    if args.log is not None:      # closed with the session: its final size
+        print(f"hil serve: log {args.log} ({LogRate(args.log, 1.0).size() / 2**20:.1f} MiB)",
+              file=sys.stderr, flush=True)
     return 0

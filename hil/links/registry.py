@@ -419,6 +419,40 @@ def connect(spec: str) -> BoardConnection:
                     + _plugins_hint())
 
 
+def check_link(spec: str) -> None:
+    """The link string names a kind of link this bench knows (an alias, a built-in or an
+    entry-point type, or a bare device path or URL), without opening anything; LinkError
+    with a did-you-mean otherwise (a typo in --link is said once, before any plan runs)."""
+    if spec in _ALIASES:
+        return
+    scheme, sep, rest = spec.partition(":")
+    if sep and scheme in _FILE_OPTIONS:
+        # the file a link runs or loads, and its options: checked here as connect() would
+        target, _options = _query(spec, rest, _FILE_OPTIONS[scheme])
+        if not Path(target).is_file():
+            raise LinkError(f"link '{spec}': file '{target}' does not exist")
+        return
+    if sep and (scheme in BUILTIN_TYPES or scheme in entry_point_types()):
+        return
+    if ("/" in spec and not sep) or "://" in spec:
+        return
+    import difflib
+
+    names = [*_ALIASES, *(f"{t}:" for t in BUILTIN_TYPES),
+             *(f"{t}:" for t in sorted(set(entry_point_types()) - set(BUILTIN_TYPES)))]
+    word = f"{scheme}:" if sep else spec
+    close = difflib.get_close_matches(word, names, n=1, cutoff=0.6)
+    hint = f" (did you mean '{close[0]}'?)" if close else ""
+    raise LinkError(f"unknown link '{spec}'{hint}; expected one of: {', '.join(LINK_CHOICES)}"
+                    + _plugins_hint())
+
+
+_ALIASES = ("stub", "stub-pty", "stub-can", "qemu")
+#: link types naming a file (an executable, a library, an image) -> the options they take
+_FILE_OPTIONS = {"exec": ("args", "transport"), "lib": ("args", "transport"),
+                 "qemu": ("machine", "cpu")}
+
+
 def _plugins_hint() -> str:
     extra = sorted(set(entry_point_types()) - set(BUILTIN_TYPES))
     return f"; link types from entry points ({ENTRY_POINT_GROUP}): {', '.join(extra)}" if extra else ""

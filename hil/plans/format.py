@@ -312,7 +312,7 @@ class WaitUntilStep(StepBase):
 @dataclass(frozen=True, kw_only=True)
 class WaitReadyStep(StepBase):
     """Run until the board reports it is ready (STATUS RUNNING after its start-up, SPEC.md 2
-    item 5); TIMEOUT after timeout_s naming its state, ERROR at once when it reports FAULT.
+    item 5); TIMEOUT after timeout_s naming its state, FAIL at once when it reports FAULT.
     Names the moment it became ready `mark` (a check window anchor)."""
 
     kind: ClassVar[str] = "wait_ready"
@@ -394,6 +394,7 @@ class Plan:
     timeout_s: float | None = None      # wall-clock budget for the whole plan
     plots: tuple[PlotSpec, ...] = ()
     profiles: tuple[ProfileRef, ...] = ()   # every profile it runs on (`profile` / `profiles`)
+    expect_fault: bool = False          # a board FAULT or shoot-through does not end the plan
 
     @property
     def checks(self) -> tuple[CheckStep, ...]:
@@ -446,6 +447,7 @@ PLAN_SCHEMA = obj({
     "board": NAME,
     "mode": {"enum": list(MODES)},
     "timeout_s": POSITIVE,
+    "expect_fault": {"type": "boolean"},
     "steps": {"type": "array", "minItems": 1},
     "plots": {"type": "array"},
 }, ["name", "steps"])
@@ -627,7 +629,7 @@ def _build(doc: YamlDocument, path: Path) -> Plan:
         overrides=MappingProxyType(dict(data.get("overrides", {}))),
         link=data.get("link"), board_path=board_path, mode=data.get("mode"),
         timeout_s=None if data.get("timeout_s") is None else float(data["timeout_s"]),
-        plots=plots, profiles=tuple(refs),
+        plots=plots, profiles=tuple(refs), expect_fault=bool(data.get("expect_fault", False)),
     )
 
 

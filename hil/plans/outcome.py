@@ -4,7 +4,8 @@ Check:  PASS, MARGINAL (passes, close to a limit), FAIL, ERROR (could not be
         computed: a missing signal, an empty window), SKIPPED (never reached).
 Step:   PASS, FAIL (a check step that failed), ERROR, TIMEOUT (a wait_until
         whose condition did not hold in time), SKIPPED (not reached).
-Plan:   PASS, FAIL (a check failed), ERROR (the bench or the board failed, or a
+Plan:   PASS, FAIL (a check failed, or the board tripped where the plan did not expect
+        it: a FAULT or a shoot-through ends the plan at once, the trip named), ERROR (the bench or the board failed, or a
         check could not be computed), TIMEOUT (a step's own time limit or the
         plan's wall-clock budget), ABORTED (Ctrl-C), SKIPPED (the plan's link needs a
         program this machine lacks, such as qemu-system-arm: nothing ran), each with its reason.
@@ -170,12 +171,14 @@ class PlanResult:
 def plan_outcome(steps: tuple[StepResult, ...] | list[StepResult],
                  checks: tuple[CheckResult, ...] | list[CheckResult],
                  error: str | None = None, aborted: str | None = None,
-                 timeout: str | None = None, skipped: str | None = None) -> tuple[Outcome, str]:
+                 timeout: str | None = None, skipped: str | None = None,
+                 tripped: str | None = None) -> tuple[Outcome, str]:
     """The plan's outcome and reason from its steps and checks.
 
     Precedence: ABORTED (the user stopped it) > SKIPPED (its link could not exist on this
-    machine, so nothing ran) > ERROR (bench, board or an uncomputable check) > TIMEOUT >
-    FAIL > PASS.
+    machine, so nothing ran) > ERROR (bench or board failed) > FAIL by a trip (`tripped`: the
+    board's FAULT or shoot-through ended the plan; the cause comes first) > ERROR (an
+    uncomputable check) > TIMEOUT > FAIL > PASS.
     """
     if aborted is not None:
         return Outcome.ABORTED, aborted
@@ -183,6 +186,8 @@ def plan_outcome(steps: tuple[StepResult, ...] | list[StepResult],
         return Outcome.SKIPPED, skipped
     if error is not None:
         return Outcome.ERROR, error
+    if tripped is not None:
+        return Outcome.FAIL, tripped
     errored = [c for c in checks if c.outcome is Outcome.ERROR]
     if errored:
         return Outcome.ERROR, f"check '{errored[0].name}' could not be computed: {errored[0].message}"

@@ -397,7 +397,7 @@ def html_report(result: PlanResult, signals: SignalSet, plots: Sequence = ()) ->
              f"<title>{e(suite_name(result))} - {e(result.outcome.value)}</title><style>{_CSS}</style></head><body>",
              f"<h1>{e(result.plan_name)} {_badge(result.outcome.value)}</h1>",
              f"<p>profile: <b>{e(result.profile or 'paper')}</b></p>",
-             f"<p>{e(result.reason)}</p>"]
+             _cause_html(result)]
     meta = [("source", result.source), ("profile", result.profile or "-"), ("link / mode", f"{result.link} / {result.mode}"),
             ("simulated time", f"{result.sim_duration_s:.4f} s"),
             ("wall time", f"{result.wall_duration_s:.2f} s"),
@@ -440,6 +440,9 @@ def html_report(result: PlanResult, signals: SignalSet, plots: Sequence = ()) ->
                      f'<p class="muted">{e(c.kind)}; {e(", ".join(c.signals))}; {e(window)} {e(where)}</p>')
         if c.outcome is not Outcome.SKIPPED and c.plot:
             parts.append(_img(check_figure(c, signals), c.name))
+        elif c.outcome is Outcome.SKIPPED and c.plot and c.signals:
+            # never reached: its signals as recorded up to the moment the run ended
+            parts.append(_img(recorded_figure(c, signals, result.marks, end_s), c.name))
 
     if result.steps:
         parts.append("<h2>Steps</h2><table><tr><th>#</th><th>line</th><th>step</th><th>outcome</th>"
@@ -456,6 +459,40 @@ def html_report(result: PlanResult, signals: SignalSet, plots: Sequence = ()) ->
         parts.append(_board_states_html(result.extra["board_states"]))
     parts.append('<p class="muted">hil-bench report</p></body></html>\n')
     return "".join(parts)
+
+
+def _cause_html(result: PlanResult) -> str:
+    """The reason at the top; for a plan that did not pass, as its cause, with the board's
+    FAULTs named and the moment the run ended."""
+    e = escape
+    if result.outcome in (Outcome.PASS,):
+        return f"<p>{e(result.reason)}</p>"
+    color = _COLORS.get(result.outcome.value, "#57606a")
+    rows = [f"<p><b>Cause</b>: {e(result.reason)}</p>"]
+    faults = result.extra.get("board_faults") or []
+    if faults:
+        items = "".join(f"<li>{e(str(f.get('text') or _fault_words(f)))}</li>" for f in faults[:5])
+        more = f"<li>and {len(faults) - 5} more</li>" if len(faults) > 5 else ""
+        rows.append(f"<p>Board FAULTs ({len(faults)}):</p><ul>{items}{more}</ul>")
+    rows.append(f'<p class="muted">the run ended at t = {result.sim_duration_s:.6g} s simulated; '
+                f'checks not reached are SKIPPED, their signals drawn up to that moment</p>')
+    return (f'<div class="cause" style="border-left:4px solid {color};padding:.2em .8em;'
+            f'background:#f6f8fa">' + "".join(rows) + "</div>")
+
+
+def _fault_words(fault: Mapping) -> str:
+    return (f"period {fault.get('period')}: board FAULT {fault.get('code')} "
+            f"{fault.get('name', '')}, value {fault.get('value')}")
+
+
+def recorded_figure(c: CheckResult, signals: SignalSet, marks: Mapping[str, float],
+                    end_s: float) -> str | None:
+    """A check never reached: its signals from the start to the end of the recording."""
+    from types import SimpleNamespace
+
+    spec = SimpleNamespace(title=f"{c.name} [SKIPPED]: recorded up to t = {end_s:.6g} s",
+                           signals=tuple(c.signals), type="time", window=None, unit=None)
+    return plan_figure(spec, signals, marks, end_s)
 
 
 def _board_states_html(changes: Sequence[Mapping]) -> str:

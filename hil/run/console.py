@@ -10,7 +10,9 @@ has passed and by `close()` at the end of the plan. So a burst of thousands of m
 answers costs a few lines, and nothing that happened goes unsaid.
 
 The session itself already warns once, on stderr, of the first board FAULT and the first
-shoot-through (so does a Python user of `Bench`); the console does not repeat those first ones.
+shoot-through (so does a Python user of `Bench`), naming the plan and profile of a plan run;
+the console does not repeat those first ones. `hil run` sets the console's `prefix` to name
+the plan and profile of each run too ("hil: speed-step [paper]: t = ...").
 """
 from __future__ import annotations
 

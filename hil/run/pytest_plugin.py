@@ -137,7 +137,8 @@ class _HilItem(pytest.Item):
 
 
 class PlanItem(_HilItem):
-    """Passes when the plan ran to its end (PASS or FAIL); its checks are items of their own."""
+    """Passes when the plan ran to its end (PASS, or FAIL by a check); its checks are items of
+    their own."""
 
     line = 1
 
@@ -151,7 +152,9 @@ class PlanItem(_HilItem):
         self.user_properties.append(("reason", result.reason))
         if result.outcome is Outcome.SKIPPED:       # its link cannot run on this machine
             pytest.skip(result.reason)
-        if result.outcome in (Outcome.ERROR, Outcome.TIMEOUT, Outcome.ABORTED):
+        # a step that FAILed (not a check): the board tripped and the plan ended there
+        tripped = any(s.outcome is Outcome.FAIL and s.kind != "check" for s in result.steps)
+        if tripped or result.outcome in (Outcome.ERROR, Outcome.TIMEOUT, Outcome.ABORTED):
             raise HilCheckFailure(f"{result.source}: plan '{result.plan_name}' ended "
                                   f"{result.outcome.value}: {result.reason}")
 

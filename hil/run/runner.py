@@ -50,6 +50,57 @@ class PlanTimeout(Exception):
     """A step's own time limit, or the plan's wall-clock budget, ran out."""
 
 
+class BoardTripped(Exception):
+    """The board tripped (a FAULT, a shoot-through) where the plan did not provoke it: the step
+    ends at once and the plan ends FAIL, naming the cause (a verdict on the board)."""
+
+
+class TripWatch:
+    """Board FAULTs and shoot-throughs since the plan began, against what the plan expects.
+
+    A run in which a fault has been injected (a plan's `fault` step, the Modbus fault bits, the
+    Python API: hil/faults/injector.py) or whose plan says `expect_fault: true` expects the
+    board may trip: its checks judge the trip (ctrl.fault_code, ctrl.state). Any other run
+    ends at the first trip; the step running then ends at once."""
+
+    def __init__(self, session: BenchSession, expected: bool = False):
+        self.session = session
+        self.expected = expected
+        self._faults = len(session.faults)
+        self._shoot_throughs = session.shoot_throughs
+
+    def __call__(self) -> bool:
+        """True when the board has tripped and the run does not expect it (every period: the
+        counts first, the injector's history only after a trip)."""
+        s = self.session
+        if len(s.faults) == self._faults and s.shoot_throughs == self._shoot_throughs:
+            return False
+        return not self._expected_now()
+
+    def _expected_now(self) -> bool:
+        injector = self.session.fault_injector
+        if not self.expected and injector is not None:
+            self.expected = any(r["action"] == "inject" for r in injector.history)
+        return self.expected
+
+    def cause(self) -> str:
+        """The first trip in words: 'period 14 (t = 0.0007 s): board FAULT 1 OVERCURRENT,
+        value 20.09 A' (SPEC 2.9's wording, as the session's warning)."""
+        s = self.session
+        if len(s.faults) > self._faults:
+            return fault_text(s.faults[self._faults], s.period_s)
+        shoot = next((data for _t, kind, data in s.events if kind == "shoot_through"), None)
+        if shoot is None:
+            return "shoot-through"
+        k = shoot["period"]
+        return (f"period {k} (t = {k * s.period_s:.6g} s): shoot-through, GATES "
+                f"0x{shoot['gates']:02x} turns on both switches of leg {', '.join(shoot['legs'])}")
+
+    def check(self, where: str) -> None:
+        if self():
+            raise BoardTripped(f"{where}: the board tripped: {self.cause()}")
+
+
 def expand_plan_paths(paths: Iterable[str | Path]) -> list[Path]:
     files = plan_files(paths)
     missing = [p for p in files if not p.exists()]
@@ -107,6 +158,43 @@ def check_plan_board(plan: Plan, board) -> None:
                                   f"steps[{step.index}].param_set.{name}")
 
 
+def plan_runs(plans: Iterable[Plan], profile=None) -> list[tuple[Plan, ProfileRef]]:
+    """Every (plan, profile) a command runs: each plan on `profile` when given, else on each
+    of its own profiles."""
+    return [(plan, ref) for plan in plans
+            for ref in ([profile_ref(plan, str(profile))] if profile else
+                        (plan.profiles or [profile_ref(plan)]))]
+
+
+def validate_run(plan: Plan, ref: ProfileRef, link: str | None = None, board=None) -> None:
+    """What a run of `plan` on `ref` needs, checked without running anything: the profile
+    loads with the plan's overrides, the board takes every param_set, the commands and loads
+    lie within the profile's ranges. ConfigError naming the file, line and key."""
+    try:
+        profile = profile_for(plan, ref)
+    except ConfigError as exc:
+        if exc.source == str(plan.source_path):
+            raise
+        # the profile's own file, line and key, and the plan that runs on it
+        raise ConfigError(f"{exc.message} (profile '{ref.label}' of plan "
+                          f"{plan.source_path})", exc.source, exc.line, exc.key) from None
+    check_plan_board(plan, board_for(plan, link, board))
+    check_control_inputs(plan.steps, ControlLimits.from_profile(profile), str(plan.source_path))
+
+
+def validate_runs(runs: Iterable[tuple[Plan, ProfileRef]], link: str | None = None,
+                  board=None) -> None:
+    """validate_run for every run, and each link string once (hil.links.registry.check_link),
+    before the first run: a typo is one error, not one per plan."""
+    from hil.links.registry import check_link
+
+    runs = list(runs)
+    for spec in dict.fromkeys(link or plan.link or "stub" for plan, _ref in runs):
+        check_link(spec)
+    for plan, ref in runs:
+        validate_run(plan, ref, link, board)
+
+
 def profile_for(plan: Plan, profile: "str | Path | ProfileRef | None" = None):
     """The bench profile of a run (profile_ref), with the plan's overrides applied."""
     ref = profile_ref(plan, profile)
@@ -119,7 +207,16 @@ def plan_dir_name(plan: Plan, ref: ProfileRef | None = None) -> str:
     labels = [r.label for r in plan.profiles] or ["paper"]
     if ref is None or (len(labels) == 1 and ref.label == labels[0]):
         return slug(plan.name)
-    return f"{slug(plan.name)}/{slug(ref.label.replace('/', '-'))}"
+    return f"{slug(plan.name)}/{profile_dir_name(ref)}"
+
+
+def profile_dir_name(ref: ProfileRef) -> str:
+    """A profile's folder: its name, or a profile file's stem ('../profiles/x.yaml' -> 'x'),
+    never hidden from `ls` and globs by a leading dot."""
+    label = ref.label
+    if "/" in label or label.endswith((".yaml", ".yml")):
+        label = Path(label).stem
+    return slug(label).lstrip(".") or "profile"
 
 
 # --------------------------------------------------------------------------- live signals
@@ -284,7 +381,7 @@ def _run(plan: Plan, opts: RunOptions) -> tuple[PlanResult, SignalSet]:
     started = _dt.datetime.now(_dt.timezone.utc)
     wall0 = time.monotonic()
     state = _RunState()
-    error = aborted = timeout = skipped = None
+    error = aborted = timeout = skipped = tripped = None
     session = None
     port = None
     try:
@@ -326,15 +423,15 @@ def _run(plan: Plan, opts: RunOptions) -> tuple[PlanResult, SignalSet]:
         timeout = str(exc)
     except LinkUnavailable as exc:      # e.g. no qemu-system-arm here: SKIPPED, with the reason
         skipped = str(exc)
+    except BoardTripped as exc:
+        tripped = str(exc)
     except (SessionError, ConfigError, OSError, ValueError, RuntimeError) as exc:
         error = str(exc)
-        if session is not None and state.steps and session.error is None:
-            pass
     finally:
         if port is not None:
             port.stop()
         if session is not None:
-            session.close(reason=aborted or skipped or error or timeout)
+            session.close(reason=aborted or skipped or error or timeout or tripped)
     sim_end = session.plant.t_s if session is not None else 0.0
     signals = SignalSet.from_arrays(session.recorder.arrays()) if session is not None else SignalSet()
     checks: list[CheckResult] = []
@@ -354,19 +451,21 @@ def _run(plan: Plan, opts: RunOptions) -> tuple[PlanResult, SignalSet]:
                        Outcome.FAIL: Outcome.FAIL}.get(match.outcome, Outcome.ERROR)
             s = StepResult(s.index, s.kind, outcome, s.line, s.start_s, s.end_s, match.message)
         steps.append(s)
-    why = aborted or skipped or error or timeout
+    why = aborted or skipped or error or timeout or tripped
     if why is not None:
         rest_steps, rest_checks = skipped_remainder(plan, steps, checks, why)
         steps += rest_steps
         checks += rest_checks
     outcome, reason = plan_outcome(steps, checks, error=error, aborted=aborted, timeout=timeout,
-                                   skipped=skipped)
+                                   skipped=skipped, tripped=tripped)
     extra: dict[str, Any] = {}
     if session is not None:
         extra["board"] = session.board_name
         extra["board_file"] = session.board.summary()
         extra["link_counters"] = session.link_counters() if session.conn is not None else {}
-        extra["board_faults"] = [{"code": f.code, "period": f.period, "value": f.value}
+        extra["board_faults"] = [{"code": f.code, "name": fault_name(f.code), "period": f.period,
+                                  "t_s": f.period * session.period_s, "value": f.value,
+                                  "text": fault_text(f, session.period_s)}
                                  for f in session.faults]
         # every change of the board's STATUS state; "ready": true marks when it became ready
         extra["board_states"] = list(session.board_state.changes)
@@ -391,15 +490,22 @@ def _execute(plan: Plan, session: BenchSession, stimuli: Stimuli, state: _RunSta
     period = session.period_s
     total_s = plan.min_sim_duration_s()
     chunk = max(1, round(PROGRESS_CHUNK_S / period))
+    trips = TripWatch(session, expected=plan.expect_fault)
 
     def advance(count: int, stop=None) -> int:
+        """Runs up to `count` periods; stops at once when the board trips (TripWatch)."""
+        def stop_or_trip() -> bool:
+            return trips() or (stop is not None and stop())
+
         done = 0
         while done < count:
             n = min(chunk, count - done)
-            ran = session.run_periods(n, stop)
+            ran = session.run_periods(n, stop_or_trip)
             done += ran
             if progress is not None:
                 progress(session.plant.t_s, total_s)
+            if trips():
+                break
             if deadline is not None and time.monotonic() > deadline:
                 raise PlanTimeout(f"plan '{plan.name}' exceeded its wall-clock budget "
                                   f"timeout_s = {plan.timeout_s:g} s")
@@ -411,65 +517,89 @@ def _execute(plan: Plan, session: BenchSession, stimuli: Stimuli, state: _RunSta
         if on_step is not None:
             on_step(step)
         t_start = session.plant.t_s
-        outcome, message = Outcome.PASS, ""
-        if isinstance(step, CommandStep):
-            session.send_command(**step.changes())
-        elif isinstance(step, ParamSetStep):
-            for name, value in step.params:
-                session.param_set(name, value)
-        elif isinstance(step, LoadStep):
-            apply_load(session, stimuli, step)
-            session.event("load", type=step.type, torque_nm=step.torque_nm)
-        elif isinstance(step, DcLinkStep):
-            stimuli.dc_link(step)
-            session.event("dc_link", voltage_v=step.voltage_v, ramp_s=step.ramp_s)
-        elif isinstance(step, PlantParamStep):
-            for name, value in step.params:
-                session.plant.set_motor_param(name, value)
-            session.event("plant_param", **dict(step.params))
-        elif isinstance(step, FaultStep):
-            from hil.faults.injector import apply_fault
-
-            apply_fault(session, step)
-        elif isinstance(step, RunStep):
-            advance(round(step.duration_s / period))
-        elif isinstance(step, WaitUntilStep):
-            getter = live_getter(session, step.signal)
-            test = step.predicate(live_unit(step.signal))
-            hold_periods = max(1, round(step.hold_s / period)) if step.hold_s else 1
-            held = [0]
-
-            def met() -> bool:
-                if test(getter()):
-                    held[0] += 1
-                else:
-                    held[0] = 0
-                return held[0] >= hold_periods
-
-            limit = round(step.timeout_s / period)
-            ran = advance(limit, met)
-            if held[0] < hold_periods:
-                message = f"condition not met within {step.timeout_s:g} s: {step.describe()}"
-                state.steps.append(StepResult(step.index, step.kind, Outcome.TIMEOUT, step.line,
-                                              t_start, session.plant.t_s, message))
-                raise PlanTimeout(f"step {step.index + 1} (wait_until, line {step.line}): {message}")
-            message = f"met after {ran * period * 1e3:.1f} ms"
-        elif isinstance(step, WaitReadyStep):
-            message = _wait_ready(step, session, state, advance, t_start)
-        elif isinstance(step, MarkStep):
-            state.marks[step.name] = session.plant.t_s
-            session.event("mark", name=step.name)
-        elif isinstance(step, CheckStep):
-            # The last recorded sample is the previous period's (signals sit at t_k).
-            state.checks_reached.append((step, max(session.plant.t_s - period, 0.0)))
+        where = f"step {step.index + 1} ({step.kind}, line {step.line})"
+        try:
+            outcome, message = _execute_step(step, session, stimuli, state, advance, t_start,
+                                             trips)
+            trips.check(where)
+        except BoardTripped as exc:
+            message = str(exc).removeprefix(f"{where}: ")
+            state.steps.append(StepResult(step.index, step.kind, Outcome.FAIL, step.line, t_start,
+                                          session.plant.t_s, message))
+            raise
+        except SessionError as exc:       # a watchdog trip, a failed link, a refusal: ERROR
+            if not state.steps or state.steps[-1].index != step.index:
+                state.steps.append(StepResult(step.index, step.kind, Outcome.ERROR, step.line,
+                                              t_start, session.plant.t_s, str(exc)))
+            raise
         state.steps.append(StepResult(step.index, step.kind, outcome, step.line, t_start,
                                       session.plant.t_s, message))
 
 
+def _execute_step(step, session: BenchSession, stimuli: Stimuli, state: _RunState, advance,
+                  t_start: float, trips: TripWatch) -> tuple[Outcome, str]:
+    """One step; returns its outcome and message (a TIMEOUT records itself and raises)."""
+    period = session.period_s
+    outcome, message = Outcome.PASS, ""
+    if isinstance(step, CommandStep):
+        session.send_command(**step.changes())
+    elif isinstance(step, ParamSetStep):
+        for name, value in step.params:
+            session.param_set(name, value)
+    elif isinstance(step, LoadStep):
+        apply_load(session, stimuli, step)
+        session.event("load", type=step.type, torque_nm=step.torque_nm)
+    elif isinstance(step, DcLinkStep):
+        stimuli.dc_link(step)
+        session.event("dc_link", voltage_v=step.voltage_v, ramp_s=step.ramp_s)
+    elif isinstance(step, PlantParamStep):
+        for name, value in step.params:
+            session.plant.set_motor_param(name, value)
+        session.event("plant_param", **dict(step.params))
+    elif isinstance(step, FaultStep):
+        from hil.faults.injector import apply_fault
+
+        apply_fault(session, step)
+    elif isinstance(step, RunStep):
+        advance(round(step.duration_s / period))
+    elif isinstance(step, WaitUntilStep):
+        getter = live_getter(session, step.signal)
+        test = step.predicate(live_unit(step.signal))
+        hold_periods = max(1, round(step.hold_s / period)) if step.hold_s else 1
+        held = [0]
+
+        def met() -> bool:
+            if test(getter()):
+                held[0] += 1
+            else:
+                held[0] = 0
+            return held[0] >= hold_periods
+
+        limit = round(step.timeout_s / period)
+        ran = advance(limit, met)
+        if held[0] < hold_periods:
+            trips.check(f"step {step.index + 1} (wait_until, line {step.line})")
+            message = f"condition not met within {step.timeout_s:g} s: {step.describe()}"
+            state.steps.append(StepResult(step.index, step.kind, Outcome.TIMEOUT, step.line,
+                                          t_start, session.plant.t_s, message))
+            raise PlanTimeout(f"step {step.index + 1} (wait_until, line {step.line}): {message}")
+        message = f"met after {ran * period * 1e3:.1f} ms"
+    elif isinstance(step, WaitReadyStep):
+        message = _wait_ready(step, session, state, advance, t_start, trips)
+    elif isinstance(step, MarkStep):
+        state.marks[step.name] = session.plant.t_s
+        session.event("mark", name=step.name)
+    elif isinstance(step, CheckStep):
+        # The last recorded sample is the previous period's (signals sit at t_k).
+        state.checks_reached.append((step, max(session.plant.t_s - period, 0.0)))
+    return outcome, message
+
+
 def _wait_ready(step: WaitReadyStep, session: BenchSession, state: _RunState, advance,
-                t_start: float) -> str:
+                t_start: float, trips: TripWatch) -> str:
     """Runs until the board's STATUS says it is ready (hil/session/board_state.py); marks that
-    moment. TIMEOUT names the state the board is in; a FAULT ends the step at once (ERROR)."""
+    moment. TIMEOUT names the state the board is in; a FAULT ends the step at once (FAIL, as
+    any trip: BoardTripped)."""
     board = session.board_state
     period = session.period_s
 
@@ -489,10 +619,9 @@ def _wait_ready(step: WaitReadyStep, session: BenchSession, state: _RunState, ad
         fault = next((f for f in reversed(session.faults) if f.code == board.fault_code), None)
         what = (fault_text(fault, period) if fault is not None else
                 f"board FAULT {board.fault_code} {fault_name(board.fault_code)} (STATUS)")
-        message = f"the board was not ready: {what}; its state is {board.describe()}"
-        state.steps.append(StepResult(step.index, step.kind, Outcome.ERROR, step.line, t_start,
-                                      session.plant.t_s, message))
-        raise SessionError(f"{where}: {message}")
+        raise BoardTripped(f"{where}: the board tripped before it was ready: {what}; its state "
+                           f"is {board.describe()}")
+    trips.check(where)        # a FAULT message ahead of the STATUS that says FAULT
     message = f"board not ready within {step.timeout_s:g} s: its state is {board.describe()}"
     state.steps.append(StepResult(step.index, step.kind, Outcome.TIMEOUT, step.line, t_start,
                                   session.plant.t_s, message))
@@ -573,8 +702,10 @@ def run_command(args) -> int:
         return 2
     plans = [load_plan(f) for f in files]  # validate every plan before anything runs
     board_arg = getattr(args, "board", None)
-    for plan in plans:                      # ... and against the board it will run on
-        check_plan_board(plan, board_for(plan, args.link, board_arg))
+    wanted = getattr(args, "profile", None)
+    runs = plan_runs(plans, wanted)
+    # ... with its profile, its board and the link, each link string once
+    validate_runs(runs, args.link, board_arg)
     modbus = None
     if args.modbus:
         from hil.cli.serve import parse_host_port
@@ -610,10 +741,6 @@ def run_command(args) -> int:
     try:
         if bar is not None:
             bar.start()
-        wanted = getattr(args, "profile", None)
-        runs = [(plan, ref) for plan in plans
-                for ref in ([profile_ref(plan, str(wanted))] if wanted else
-                            (plan.profiles or [profile_ref(plan)]))]
         for plan, ref in runs:
             on_step = None
             wall0 = time.monotonic()
@@ -628,6 +755,7 @@ def run_command(args) -> int:
                                     step="", rate="")
                 callback = functools.partial(callback, task=task)
                 on_step = lambda step, task=task, plan=plan: bar.update(task, step=_step_text(step, plan))
+            console.prefix = f"hil: {plan.name} [{ref.label}]: "   # whose event it is
             result, _signals = run_plan(plan, link=args.link, mode=args.mode, out_dir=out,
                                         seed=args.seed, progress=callback, modbus=modbus,
                                         profile=ref, live=live, console=console, on_step=on_step,
@@ -648,6 +776,9 @@ def run_command(args) -> int:
                   f"[{counts.get('PASS', 0)} pass, {counts.get('MARGINAL', 0)} marginal, "
                   f"{counts.get('FAIL', 0)} fail, {counts.get('INFO', 0)} finding] ({result.sim_duration_s:.3f} s simulated in "
                   f"{result.wall_duration_s:.1f} s)")
+            first = first_failing_check(result)
+            if first is not None:
+                print(f"         first failing check: {first}")
             if result.outcome is Outcome.ABORTED:
                 exit_code = 2
                 break
@@ -666,6 +797,20 @@ def run_command(args) -> int:
             write_summary(entries, out)
             print(f"reports: {out / 'index.html'} (JUnit: {out / 'junit.xml'})")
     return exit_code
+
+
+def first_failing_check(result: PlanResult) -> str | None:
+    """The plan's first FAIL or ERROR check in words: its name, line, measured value and
+    limits ('overshoot' (line 70): measured 7.2 %, limits <= 5 %); None if there is none."""
+    c = next((c for c in result.checks if c.outcome in (Outcome.FAIL, Outcome.ERROR)), None)
+    if c is None:
+        return None
+    where = f" (line {c.line})" if c.line is not None else ""
+    unit = "" if c.unit in ("", "1") else f" {c.unit}"
+    measured = "not computed" if c.measured is None else f"measured {c.measured:.6g}{unit}"
+    limits = c.limits.describe() if c.limits is not None else "none"
+    text = f"'{c.name}'{where} {c.outcome.value}: {measured}, limits {limits}"
+    return text if c.measured is not None else f"{text}: {c.message}"
 
 
 def skipped_remainder(plan: Plan, done_steps: list[StepResult],

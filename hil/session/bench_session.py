@@ -394,7 +394,7 @@ class BenchSession:
         status = answer.status
         if status == 1 and optional:
             text = f"{where} does not know optional parameter {name} (id {int(pid)}): not set"
-            print(f"hil: warning: {text}", file=sys.stderr)
+            self._warn(text)
             self._event("param_unknown", {"name": name, "id": int(pid), "requested": float(value)})
             return math.nan
         if status == 1:
@@ -419,7 +419,7 @@ class BenchSession:
         if clamped:
             text = (f"parameter {name}: requested {value:g}, the board clamped it to "
                     f"{answer.value:g} (in force)")
-            print(f"hil: warning: {text}", file=sys.stderr)
+            self._warn(text)
             self._event("param_clamped", {"name": name, "requested": float(value),
                                           "value": readback.value})
         else:
@@ -467,6 +467,12 @@ class BenchSession:
         if self.log is not None:
             self.log.write_json("/plan/events", round(t * 1e9), {"t_s": t, "kind": kind, **_jsonable(data)})
 
+    def _warn(self, text: str) -> None:
+        """A warning on stderr, naming the plan and profile of the run when it has them."""
+        plan = self.config.metadata.get("plan") or {}
+        whose = f"{plan['name']} [{plan.get('profile', '')}]: " if plan.get("name") else ""
+        print(f"hil: warning: {whose}{text}", file=sys.stderr)
+
     def event(self, kind: str, **data: Any) -> None:
         """Records a plan event (stimulus, mark, fault) in the event list and the log."""
         self._event(kind, data)
@@ -483,7 +489,7 @@ class BenchSession:
             self._event("board_fault", {"code": msg.code, "period": msg.period, "value": msg.value})
             self.board_faults += 1
             if self.board_faults == 1:
-                print(f"hil: warning: {_fault_text(msg, self.period_s)}", file=sys.stderr)
+                self._warn(_fault_text(msg, self.period_s))
         elif t is Status:
             self.recorder.step_value("ctrl.fault_code", msg.period, msg.fault_code)
             self.board_state.on_status(msg.state, msg.fault_code, msg.period, self.plant.period)
@@ -777,7 +783,7 @@ class BenchSession:
         turns = ", ".join(f"{leg} high and {leg} low" for leg in legs)
         text = (f"period {k} (t = {k * self.period_s:.6g} s): GATES 0x{gates:02x} turns on {turns} "
                 f"together (shoot-through); the plant's driver trip opened leg {', '.join(legs)}")
-        print(f"hil: warning: {text}", file=sys.stderr)
+        self._warn(text)
         self._event("shoot_through", {"period": k, "gates": gates, "legs": legs})
 
     def _watchdog_tripped(self, k: int, sends: int) -> None:
