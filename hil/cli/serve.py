@@ -170,4 +170,9 @@ def _serve(args, profile, config, mailbox, port, live, chunk, total, pace: str) 
             print(file=sys.stderr)             # leave the status line
         print(f"hil serve: {ran} periods ({ran * profile.control_period_s:.3f} s simulated) "
               f"in {wall:.2f} s wall", file=sys.stderr)
+        wire = session.tap.wire_stats() if session.tap is not None else {}
+        if "wire_projected_rate_hz" in wire:        # lockstep through a modelled wire
+            print(f"hil serve: through {wire['wire_model']}: {wire['wire_modelled_s']:.3f} s of "
+                  f"modelled wire time, {wire['wire_projected_rate_hz']:.0f} periods/s projected "
+                  f"(docs/adapters.md)", file=sys.stderr)
     return 0

@@ -110,13 +110,18 @@ def _usb_device_dir(device_dir: Path) -> Path | None:
 def inspect_tty(device: str, sysfs_root: Path = SYSFS_ROOT) -> AdapterInfo:
     """What the tty ``device`` (/dev/ttyUSB0, /dev/ttyACM0, /dev/pts/3) is, from sysfs."""
     real = os.path.realpath(device) if os.path.islink(device) else device
-    name = os.path.basename(real)
-    if real.startswith("/dev/pts/") or name == "ptmx" or _is_pty_major(real):
+    # the port's sysfs name: a udev link's target (/dev/serial/by-id/... -> ttyUSB0), as
+    # pyserial resolves it, unless the link's own name has an entry
+    names = [os.path.basename(device), os.path.basename(real)]
+    name = next((n for n in names if (sysfs_root / "class" / "tty" / n / "device").exists()),
+                None)
+    if name is None and (real.startswith("/dev/pts/") or os.path.basename(real) == "ptmx"
+                         or _is_pty_major(real)):
         return AdapterInfo("pty", port=device, driver="pty", description="pseudo-terminal "
                            "(a board process on this machine): no USB latency")
-    tty_dir = sysfs_root / "class" / "tty" / name
+    tty_dir = sysfs_root / "class" / "tty" / (name or names[-1])
     device_link = tty_dir / "device"
-    if not device_link.exists():
+    if name is None:
         return AdapterInfo("unknown", port=device, description=f"no sysfs entry "
                            f"{tty_dir} (not a local tty, or not Linux)")
     device_dir = Path(os.path.realpath(device_link))
@@ -145,7 +150,24 @@ def inspect_tty(device: str, sysfs_root: Path = SYSFS_ROOT) -> AdapterInfo:
         product = _read(usb / "product")
         if product:
             info.description += f" ({product})"
+    if sysfs_root == Path("/sys"):
+        _pyserial_details(real, info)
     return info
+
+
+def _pyserial_details(device: str, info: AdapterInfo) -> None:
+    """pyserial's own view of a local port (serial.tools.list_ports_linux): its USB
+    description and hardware id (VID:PID, serial number, location) for the report."""
+    try:
+        from serial.tools.list_ports_linux import SysFS
+
+        port = SysFS(device)
+    except Exception:  # noqa: BLE001 - only a description: never fatal
+        return
+    if port.vid is not None and not info.usb_id:
+        info.usb_id = f"{port.vid:04x}:{port.pid:04x}"
+    if port.hwid and port.hwid != "n/a":
+        info.notes.append(f"pyserial: {port.description} [{port.hwid}]")
 
 
 def _is_pty_major(device: str) -> bool:

@@ -132,10 +132,12 @@ class WireModel:
         return self.answer_arrival_s(at_board + compute_s, in_bytes) - t_s
 
     def lockstep_period_s(self, answer: str = "GATES", compute_s: float = 0.0,
-                          periods: int = 64) -> float:
-        """Mean modelled wall time of one lockstep period (SAMPLE, then the answer), over
-        ``periods`` periods from a USB frame boundary (the grid's phase changes by period)."""
-        out_b, in_b = serial_frame_bytes("SAMPLE"), serial_frame_bytes(answer)
+                          periods: int = 64, in_bytes: int | None = None) -> float:
+        """Mean modelled wall time of one lockstep period (SAMPLE, then the answer: ``in_bytes``
+        if given, e.g. GATES + TELEMETRY), over ``periods`` periods from a USB frame boundary
+        (the grid's phase may change from period to period)."""
+        out_b = serial_frame_bytes("SAMPLE")
+        in_b = serial_frame_bytes(answer) if in_bytes is None else in_bytes
         t = 0.0
         for _ in range(periods):
             t += self.exchange_s(t, out_b, in_b, compute_s)
@@ -143,6 +145,10 @@ class WireModel:
 
     def lockstep_rate_hz(self, answer: str = "GATES", compute_s: float = 0.0) -> float:
         return 1.0 / self.lockstep_period_s(answer, compute_s)
+
+    def lockstep_rate_hz_with(self, in_bytes: int, compute_s: float = 0.0) -> float:
+        """The lockstep rate when the board sends ``in_bytes`` a period."""
+        return 1.0 / self.lockstep_period_s(compute_s=compute_s, in_bytes=in_bytes)
 
     def shortest_realtime_period_s(self, answer: str = "GATES", compute_s: float = 0.0) -> float:
         """The shortest real-time period whose answer is back before the next tick: the

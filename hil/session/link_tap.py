@@ -22,7 +22,8 @@ Links that carry frames rather than bytes (CAN) are not tapped.
 A wire model (hil.links.wire.WireModel: ``wire=ftdi-16ms`` on the link) puts an adapter's
 latency and line time between the two. In real time (``delay_frames``) each frame is really
 held until its modelled arrival (the USB frame grid, the latency timer, the baud rate's
-serialisation, one frame after another on each line), released by the next send or receive.
+serialisation, one frame after another on each line) by a thread that owns the link
+(hil/session/wire_pump.py).
 In lockstep nothing is held: each period's traffic is accounted on a modelled clock
 (``wire_stats``: the modelled wire time, and the lockstep rate projected from it and the
 measured time), so a run "through an FTDI at 16 ms" costs no 16 ms sleeps.
@@ -109,8 +110,11 @@ class LinkTap:
         # the wire model (None: none): frames held in real time, time accounted in lockstep
         self.wire = wire
         self._wire_delay = wire is not None and delay_frames
-        self._wire_held = {d: deque() for d in DIRECTIONS}     # (due monotonic s, bytes)
-        self._wire_line_free = {d: 0.0 for d in DIRECTIONS}    # when each UART is free again
+        self._pump = None
+        if self._wire_delay:
+            from hil.session.wire_pump import WirePump
+
+            self._pump = WirePump(self, wire)
         self._wire_clock_s = 0.0          # the modelled clock of the lockstep accounting
         self._wire_marks = None           # captured lengths at the last tick
         self._wire_started = None         # monotonic time of the first accounted tick
@@ -130,6 +134,13 @@ class LinkTap:
 
     def tick(self, period: int) -> None:
         """Called once per period: lifts expired faults, releases delayed frames."""
+        if self._pump is not None:
+            with self._pump.lock:       # the pump thread decodes under the same lock
+                self._tick(period)
+        else:
+            self._tick(period)
+
+    def _tick(self, period: int) -> None:
         self.period = period
         if self.wire is not None and not self._wire_delay:
             self._wire_account()
@@ -235,58 +246,11 @@ class LinkTap:
                          wire_projected_rate_hz=periods / (self._wire_clock_s + measured))
         return stats
 
-    def _wire_queue(self, direction: str, data: bytes, now: float) -> None:
-        wire = self.wire
-        line = wire._line(len(data))
-        if direction == "out":
-            due = wire.sample_arrival_s(now, len(data))
-        else:
-            due = wire.answer_arrival_s(now, len(data))
-        # one line each way: a frame cannot finish before the one ahead of it plus its own bytes
-        due = max(due, self._wire_line_free[direction] + line)
-        self._wire_line_free[direction] = due
-        self._wire_held[direction].append((due, data))
-
-    def _wire_pump(self, now: float) -> None:
-        """Hands over every held frame whose modelled arrival has come."""
-        out, back = self._wire_held["out"], self._wire_held["in"]
-        while out and out[0][0] <= now:
-            self.link.send_bytes(out.popleft()[1])
-        while back and back[0][0] <= now:
-            self._take_in_now(back.popleft()[1])
-
-    def _wire_next_due(self) -> float | None:
-        dues = [q[0][0] for q in self._wire_held.values() if q]
-        return min(dues) if dues else None
-
     def _send_out(self, frame: bytes) -> None:
-        if self._wire_delay:
-            now = time.monotonic()
-            self._wire_queue("out", frame, now)
-            self._wire_pump(now)
+        if self._pump is not None:
+            self._pump.send(frame)
         else:
             self.link.send_bytes(frame)
-
-    def _wire_recv(self, timeout_s: float | None):
-        """recv() with the frames held to their modelled arrival."""
-        inbox = self.inbox
-        clock = time.monotonic
-        deadline = None if timeout_s is None else clock() + max(0.0, timeout_s)
-        while True:
-            now = clock()
-            self._wire_pump(now)
-            if inbox:
-                return inbox.popleft()
-            wait = None if deadline is None else max(0.0, deadline - now)
-            due = self._wire_next_due()
-            if due is not None:
-                wait = max(0.0, due - now) if wait is None else min(wait, max(0.0, due - now))
-            data = self.link.read_bytes(wait)
-            if data:
-                self._wire_queue("in", data, clock())
-            if deadline is not None and clock() >= deadline:
-                self._wire_pump(clock())
-                return inbox.popleft() if inbox else None
 
     # ------------------------------------------------------------ data paths
     def _deliver(self, direction: str, frame: bytes) -> None:
@@ -306,15 +270,16 @@ class LinkTap:
 
     def send(self, msg) -> None:
         frame = self._encoder.encode(msg)
+        if self._pump is not None:
+            with self._pump.lock:       # the pump thread counts and decodes under it too
+                self._pass("out", frame)
+            return
         if self.faults:
             self._pass("out", frame)
             return
         self.captured["out"] += frame
         self.captured_frames["out"] += 1
-        if self._wire_delay:
-            self._send_out(frame)
-        else:
-            self.link.send_bytes(frame)
+        self.link.send_bytes(frame)
 
     def send_bytes(self, data: bytes) -> None:
         self._pass("out", data)
@@ -398,9 +363,6 @@ class LinkTap:
                 and self._exchange_counts is not None and self.link.exchange_ready)
 
     def _take_in(self, data: bytes) -> None:
-        if self._wire_delay:
-            self._wire_queue("in", data, time.monotonic())
-            return
         self._take_in_now(data)
 
     def _take_in_now(self, data: bytes) -> None:
@@ -433,8 +395,8 @@ class LinkTap:
         inbox = self.inbox
         if inbox:
             return inbox.popleft()
-        if self._wire_delay:
-            return self._wire_recv(timeout_s)
+        if self._pump is not None:
+            return self._pump.recv(inbox, timeout_s)
         if timeout_s is None:
             deadline = remaining = None
         else:
@@ -452,6 +414,12 @@ class LinkTap:
                     return None
 
     def take_capture(self) -> dict[str, tuple[bytes, int]]:
+        if self._pump is not None:
+            with self._pump.lock:
+                return self._take_capture()
+        return self._take_capture()
+
+    def _take_capture(self) -> dict[str, tuple[bytes, int]]:
         counts = self._exchange_counts
         if counts is not None:          # what the C exchange captured since the last time
             out0, in0 = self._exchange_taken
@@ -476,6 +444,8 @@ class LinkTap:
         return counters
 
     def close(self) -> None:
+        if self._pump is not None:
+            self._pump.close()
         self.link.close()
 
 
