@@ -70,7 +70,8 @@ class ProbeError(RuntimeError):
 
 def probe(spec: str, samples: int = DEFAULT_SAMPLES, sysfs_root: Path | None = None,
           period_ns: int = DEFAULT_PERIOD_NS, set_latency_timer_ms: int | None = None,
-          answer_wait_s: float = ANSWER_WAIT_S) -> ProbeReport:
+          answer_wait_s: float = ANSWER_WAIT_S, hello_wait_s: float = HELLO_WAIT_S
+          ) -> ProbeReport:
     """Probes the board on ``spec``; raises ProbeError naming what failed."""
     from hil.links.registry import connect, split_wire
     from hil.session.link_tap import LinkTap, tappable
@@ -95,7 +96,7 @@ def probe(spec: str, samples: int = DEFAULT_SAMPLES, sysfs_root: Path | None = N
             info.low_latency = adapters.read_low_latency(descriptor() if descriptor else None)
         if info.kind == "can" and info.can_bitrate is None and info.driver == "socketcan":
             info.can_bitrate = adapters.can_bitrate_from_ip(info.port)
-        hello = _hello(link, period_ns, spec)
+        hello = _hello(link, period_ns, spec, hello_wait_s)
         report = ProbeReport(spec, _name(hello), info, adapters.advice(info))
         _train(link, samples, answer_wait_s, report)
         try:
@@ -114,12 +115,12 @@ def probe(spec: str, samples: int = DEFAULT_SAMPLES, sysfs_root: Path | None = N
     return report
 
 
-def _hello(link, period_ns: int, spec: str) -> Hello:
+def _hello(link, period_ns: int, spec: str, wait_s: float) -> Hello:
     mine = Hello(proto_version=PROTOCOL_VERSION, role=int(Role.BENCH), capabilities=0,
                  control_period_ns=period_ns, name=b"hil-probe")
     for _ in range(HELLO_TRIES):
         link.send(mine)
-        deadline = time.monotonic() + HELLO_WAIT_S
+        deadline = time.monotonic() + wait_s
         while (left := deadline - time.monotonic()) > 0:
             msg = link.recv(left)
             if isinstance(msg, Hello):
@@ -128,7 +129,7 @@ def _hello(link, period_ns: int, spec: str) -> Hello:
                                      f"{msg.proto_version}, the bench {PROTOCOL_VERSION}")
                 return msg
     raise ProbeError(f"probe '{spec}': no HELLO from the board after {HELLO_TRIES} tries of "
-                     f"{HELLO_WAIT_S:g} s")
+                     f"{wait_s:g} s")
 
 
 def _train(link, samples: int, answer_wait_s: float, report: ProbeReport) -> None:

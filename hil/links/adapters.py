@@ -49,6 +49,7 @@ class AdapterInfo:
     can_bitrate: int | None = None
     baud: int | None = None
     sysfs_path: str = ""                      # the port's device directory
+    tty_name: str = ""                        # its name in sysfs (ttyUSB0)
     wire: WireModel | None = None             # a modelled wire (wire= on the link), if any
     notes: list[str] = field(default_factory=list)
 
@@ -133,7 +134,7 @@ def inspect_tty(device: str, sysfs_root: Path = SYSFS_ROOT) -> AdapterInfo:
     info = AdapterInfo(driver if driver in KNOWN_DRIVERS else "serial", port=device,
                        driver=driver, description=KNOWN_DRIVERS.get(driver, f"serial port "
                                                                     f"(driver {driver or 'unknown'})"),
-                       sysfs_path=str(device_dir))
+                       sysfs_path=str(device_dir), tty_name=name)
     timer = _read(device_dir / "latency_timer")
     if timer is not None and timer.isdigit():
         info.latency_timer_ms = int(timer)
@@ -286,8 +287,8 @@ def udev_rule() -> str:
 
 
 def latency_timer_fix(info: AdapterInfo) -> str:
-    real = info.port.startswith("/dev/") and info.wire is None
-    name = os.path.basename(info.port) if real else "ttyUSBn"
+    real = bool(info.tty_name) and info.wire is None
+    name = info.tty_name if real else "ttyUSBn"
     now = f"or `hil probe {_link_of(info)} --set-latency-timer 1`" if real else \
         "on the real adapter's port; here the wire is modelled: wire=ftdi-1ms"
     return (f"echo 1 | sudo tee /sys/bus/usb-serial/devices/{name}/latency_timer   (now; {now}),"
@@ -297,7 +298,7 @@ def latency_timer_fix(info: AdapterInfo) -> str:
 
 
 def _link_of(info: AdapterInfo) -> str:
-    return f"serial:{info.port}" if info.port.startswith("/dev/") else info.port
+    return f"serial:{info.port}" if "/" in info.port else info.port
 
 
 def advice(info: AdapterInfo) -> Advice:

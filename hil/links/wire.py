@@ -71,21 +71,38 @@ def wire_time_table(bauds=(115_200, 921_600, 2_000_000, 3_000_000),
                     messages=("SAMPLE", "GATES", "DUTY", "DUTY_LEGS", "TELEMETRY")) -> str:
     """docs/adapters.md's table of line time per message (a test holds the doc to it)."""
     head = ["message", "bytes"] + [f"{b} baud" for b in bauds] + ["CAN bits"] + \
-        [f"CAN {r // 1000} kbit/s" for r in bitrates]
+        [f"CAN {r / 1e6:g} Mbit/s" if r >= 1_000_000 else f"CAN {r // 1000} kbit/s"
+         for r in bitrates]
     rows = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for name in messages:
         n = serial_frame_bytes(name)
         cells = [name, str(n)] + [_us(uart_time_s(n, b)) for b in bauds]
         lo, hi = can_message_bits(name), can_message_bits(name, stuffed=True)
-        cells.append(f"{lo}-{hi}")
-        cells += [f"{_us(lo / r)}-{_us(hi / r)}" for r in bitrates]
+        cells.append(f"{lo} - {hi}")
+        cells += [f"{_us(lo / r)} - {_us(hi / r)}" for r in bitrates]
         rows.append("| " + " | ".join(cells) + " |")
+    return "\n".join(rows)
+
+
+def lockstep_rate_table(names=("ftdi-16ms", "ftdi-4ms", "ftdi-1ms", "cp210x", "ch340",
+                               "cdc-fs", "cdc-hs")) -> str:
+    """docs/adapters.md's table of what each modelled adapter allows (GATES answers at
+    2 Mbaud, the board's own computation not counted; a test holds the doc to it)."""
+    rows = ["| wire model | driver | one lockstep period | periods/s | 1 s at 20 kHz takes | "
+            "shortest real-time period |", "|---|---|---|---|---|---|"]
+    for name in names:
+        model = parse_wire(name)
+        period = model.lockstep_period_s()
+        rows.append(f"| `{name}` | {model.driver} | {_us(period)} | {1 / period:.0f} | "
+                    f"{20_000 * period:.1f} s | {_us(model.shortest_realtime_period_s())} |")
     return "\n".join(rows)
 
 
 def _us(seconds: float) -> str:
     us = seconds * 1e6
-    return f"{us:.0f} µs" if us < 10_000 else f"{us / 1000:.1f} ms"
+    if us < 1000:
+        return f"{us:.0f} µs"
+    return f"{us / 1000:.2f} ms" if us < 10_000 else f"{us / 1000:.1f} ms"
 
 
 @dataclass(frozen=True)
@@ -152,15 +169,12 @@ class WireModel:
 
     def shortest_realtime_period_s(self, answer: str = "GATES", compute_s: float = 0.0) -> float:
         """The shortest real-time period whose answer is back before the next tick: the
-        worst-case round trip over the grid's phases (SAMPLE sent at any instant)."""
+        round trip's worst case over the grid's phase (a SAMPLE sent just after a frame
+        boundary waits almost a whole frame at each grid), and at least each line's bytes."""
         out_b, in_b = serial_frame_bytes("SAMPLE"), serial_frame_bytes(answer)
-        grid = max(self.out.grid_s, self.back.grid_s)
-        steps = 50
-        phases = [grid * i / steps for i in range(steps)] if grid > 0 else [0.0]
-        worst = max(self.exchange_s(p + 1e-9, out_b, in_b, compute_s) for p in phases)
-        # the bytes must also fit the line once per period (both ways at once)
-        line = max(self._line(out_b), self._line(in_b))
-        return max(worst, line)
+        worst = (self.out.latency_s + self.out.grid_s + self._line(out_b) + compute_s
+                 + self._line(in_b) + self.back.latency_s + self.back.grid_s)
+        return max(worst, self._line(out_b), self._line(in_b))
 
     def describe(self) -> str:
         parts = [f"out {_us(self.out.latency_s)} + {_grid(self.out.grid_s)}",

@@ -1,0 +1,171 @@
+"""`hil probe` and the session's adapter check against boards on pseudo-terminals: the stub
+(`stub-pty`), the stub through the wire model at 16 ms and 1 ms, and a fake board whose port
+a fake sysfs tree describes as each driver. Timings are reported, never asserted: a round trip
+is checked positive and finite, and every figure that is asserted comes from the model or the
+tree. The modelled waits are held for real only in the probe (a few SAMPLEs, ~20 ms each) and
+in one bounded real-time run; lockstep accounts them without sleeping."""
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+from mcap.reader import make_reader
+
+from plant_rt import load_profile
+
+from hil.cli.main import main as hil_main
+from hil.cli.probe import probe
+from hil.links import adapters
+from hil.session.bench_session import BenchSession, SessionConfig, SessionError
+from tests.fake_board import FakeBoard
+from tests.fake_sysfs import add_tty
+
+SAMPLES = 6
+
+
+def _check_structure(summary: dict, samples: int = SAMPLES) -> None:
+    assert summary["samples_sent"] == samples and summary["answered"] == samples
+    assert summary["missing"] == 0
+    rtt = summary["round_trip_us"]
+    assert set(rtt) == {"min", "p50", "p90", "p99", "max", "mean"}
+    assert all(math.isfinite(v) and v > 0 for v in rtt.values())
+    assert rtt["min"] <= rtt["p50"] <= rtt["p90"] <= rtt["p99"] <= rtt["max"]
+    assert summary["lockstep_rate_hz"] == pytest.approx(1e6 / rtt["mean"])
+    assert summary["shortest_realtime_period_us"] == rtt["p99"]
+
+
+def test_probe_over_stub_pty_reports_the_ptys_own_round_trip(capsys):
+    assert hil_main(["probe", "stub-pty", "--samples", str(SAMPLES), "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    _check_structure(summary)
+    assert summary["board"].startswith("hil-stub")
+    assert summary["adapter"]["kind"] == "pty" and not summary["poor"] and not summary["fix"]
+    assert summary["expected"] == {}            # no adapter: no model to expect
+
+
+@pytest.mark.parametrize("wire, poor, cause, rate_hz", [
+    ("ftdi-16ms", True, "latency timer 16 ms", 1000 / 17),
+    ("ftdi-1ms", False, "latency timer 1 ms", 1000 / 2),
+])
+def test_probe_through_the_wire_model_names_cause_and_fix(wire, poor, cause, rate_hz):
+    report = probe(f"stub-pty?wire={wire}", samples=SAMPLES)
+    summary = report.summary()
+    _check_structure(summary)
+    assert summary["adapter"]["modelled.wire_model"] == wire
+    assert summary["poor"] is poor and cause in summary["cause"]
+    assert ("latency_timer" in summary["fix"]) is poor
+    assert summary["expected"]["lockstep_rate_hz"] == pytest.approx(rate_hz)
+
+
+@pytest.fixture
+def board_as(tmp_path, monkeypatch):
+    """A fake board on a pty, reached through /dev-like link NAME that the fake sysfs tree
+    describes as DRIVER."""
+    boards = []
+
+    def make(name: str, driver: str, **tty) -> str:
+        board = FakeBoard().__enter__()
+        boards.append(board)
+        sysfs = tmp_path / "sys"
+        add_tty(sysfs, name, driver, **tty)
+        (tmp_path / "dev").mkdir(exist_ok=True)
+        (tmp_path / "dev" / name).symlink_to(board.slave_path)
+        monkeypatch.setattr(adapters, "SYSFS_ROOT", sysfs)
+        return f"serial:{tmp_path / 'dev' / name}"
+
+    yield make
+    for board in boards:
+        board.__exit__(None, None, None)
+
+
+@pytest.mark.parametrize("name, driver, tty, poor, cause, fix", [
+    ("ttyUSB0", "ftdi_sio", {"latency_timer_ms": 16}, True, "latency timer 16 ms",
+     "/sys/bus/usb-serial/devices/ttyUSB0/latency_timer"),
+    ("ttyUSB0", "ftdi_sio", {"latency_timer_ms": 1}, False, "latency timer 1 ms", ""),
+    ("ttyACM0", "cdc_acm", {"speed": "480"}, False, "125 us high-speed microframes", ""),
+    ("ttyUSB1", "cp210x", {}, False, "CP210x", "FTDI"),
+    ("ttyUSB2", "ch341", {}, False, "CH340/CH341", "FTDI"),
+])
+def test_probe_names_each_drivers_cause_and_fix(board_as, name, driver, tty, poor, cause, fix):
+    spec = board_as(name, driver, **tty)
+    summary = probe(spec, samples=SAMPLES).summary()
+    _check_structure(summary)
+    assert summary["adapter"]["kind"] == driver
+    assert summary["poor"] is poor and cause in summary["cause"]
+    assert (fix in summary["fix"]) if fix else summary["fix"] == ""
+
+
+def test_probe_sets_the_latency_timer_when_asked(board_as, tmp_path, capsys):
+    spec = board_as("ttyUSB0", "ftdi_sio", latency_timer_ms=16)
+    assert hil_main(["probe", spec, "--samples", "3", "--set-latency-timer", "1",
+                     "--sysfs-root", str(tmp_path / "sys")]) == 0
+    out = capsys.readouterr().out
+    assert "latency timer now 1 ms" in out and "latency timer 1 ms" in out
+    timer = next((tmp_path / "sys").rglob("latency_timer"))
+    assert timer.read_text().strip() == "1"
+
+
+def test_probe_of_a_silent_board_ends_with_its_error():
+    from hil.cli.probe import ProbeError
+
+    with FakeBoard(answer_hello=False) as board, pytest.raises(ProbeError, match="no HELLO"):
+        probe(board.url, samples=2, hello_wait_s=0.05)
+
+
+# ---------------------------------------------------------------- sessions
+
+def _metadata(path) -> dict:
+    with open(path, "rb") as f:
+        return {m.name: dict(m.metadata) for m in make_reader(f).iter_metadata()}
+
+
+@pytest.mark.parametrize("wire, warns, period_s", [("ftdi-16ms", True, 17e-3),
+                                                   ("ftdi-1ms", False, 2e-3)])
+def test_session_through_the_model_warns_and_accounts_without_sleeping(tmp_path, capsys, wire,
+                                                                       warns, period_s):
+    log = tmp_path / "run.mcap"
+    with BenchSession(load_profile(), SessionConfig(link=f"stub-pty?wire={wire}",
+                                                    log_path=log)) as session:
+        session.run_periods(40)
+        counters = session.link_counters()
+        assert session.tap._pump is None           # lockstep: nothing held for real
+    err = capsys.readouterr().err
+    assert err.count("hil: warning:") == (1 if warns else 0)
+    if warns:
+        assert "latency timer 16 ms" in err and "latency_timer" in err
+    # every period: SAMPLE 19 B out, GATES + TELEMETRY 77 B back at 2 Mbaud = 480 us, plus the
+    # timer, rounded up to the next 1 ms frame: 17 ms (16 ms) or 2 ms (1 ms), by hand
+    assert counters["wire_model"] == wire and counters["wire_periods"] == 39
+    assert counters["wire_modelled_s"] == pytest.approx(39 * period_s)
+    assert 0 < counters["wire_projected_rate_hz"] < 1 / period_s
+    meta = _metadata(log)["adapter"]
+    assert meta["modelled.wire_model"] == wire and meta["modelled.driver"] == "ftdi_sio"
+
+
+def test_session_on_a_serial_port_warns_from_sysfs(board_as, tmp_path, capsys):
+    spec = board_as("ttyUSB0", "ftdi_sio", latency_timer_ms=16)
+    log = tmp_path / "run.mcap"
+    with BenchSession(load_profile(), SessionConfig(link=spec, log_path=log)) as session:
+        session.run_periods(3)
+    err = capsys.readouterr().err
+    assert err.count("latency timer 16 ms") == 1 and "ttyUSB0/latency_timer" in err
+    meta = _metadata(log)["adapter"]
+    assert (meta["kind"], meta["driver"], meta["latency_timer_ms"]) == ("ftdi_sio", "ftdi_sio",
+                                                                         "16")
+
+
+def test_realtime_through_the_model_holds_frames_on_its_own_thread():
+    # bounded (5 periods of 20 ms) and not asserted on timing: the frames go through the pump
+    config = SessionConfig(link="stub-pty?wire=ftdi-1ms", mode="realtime",
+                           realtime_period_s=0.02)
+    with BenchSession(load_profile(), config) as session:
+        assert session.run_periods(5) == 5
+        assert session.tap._pump is not None and session.tap.wire_stats()["wire_mode"] == "held"
+        assert session.rt_stats["periods"] == 5
+
+
+def test_wire_model_on_a_can_link_is_refused():
+    with pytest.raises(SessionError, match="wire=ftdi-1ms needs a byte link"):
+        with BenchSession(load_profile(), SessionConfig(link="stub-can?wire=ftdi-1ms")):
+            pass
