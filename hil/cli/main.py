@@ -176,16 +176,6 @@ def _parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
                            help="run a sweep whose link (exec:, lib:, qemu:) runs a program it names "
                                 "(only for sweep files you trust)")
 
-    if only in (None, "probe"):
-        probe = sub.add_parser("probe", help="measure what the wire to a board allows",
-                               description="HELLO, then a train of SAMPLEs against the board: the "
-                                           "round trip, the lockstep rate and real-time period it "
-                                           "allows, what the port is (sysfs) and the fix when the "
-                                           "adapter is slow (docs/adapters.md).")
-        from hil.cli.probe import add_arguments as probe_arguments
-
-        probe_arguments(probe)
-
     if only in (None, "init"):
         init = sub.add_parser("init", help="scaffold a bench project for your motor and firmware",
                               description="Write a bench profile from nameplate values, a board file "
@@ -197,6 +187,16 @@ def _parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
             from hil.cli.init import add_arguments as init_arguments
 
             init_arguments(init)
+
+    if only in (None, "probe"):
+        probe = sub.add_parser("probe", help="measure what the wire to a board allows",
+                               description="HELLO, then a train of SAMPLEs against the board: the "
+                                           "round trip, the lockstep rate and real-time period it "
+                                           "allows, what the port is (sysfs) and the fix when the "
+                                           "adapter is slow (docs/adapters.md).")
+        from hil.cli.probe import add_arguments as probe_arguments
+
+        probe_arguments(probe)
     return parser
 
 

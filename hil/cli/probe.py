@@ -18,8 +18,6 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
-
 from protocol.messages import (PROTOCOL_VERSION, Duty, DutyLegs, Gates, Hello, Role, Sample,
                                Shutdown)
 
@@ -47,6 +45,8 @@ class ProbeReport:
     expected: dict = field(default_factory=dict)   # the wire model's figures, if one applies
 
     def summary(self) -> dict:
+        import numpy as np
+
         rtt = np.asarray(self.round_trips_s, dtype=float)
         out = {"link": self.link, "board": self.board, "samples_sent": self.samples_sent,
                "answered": int(rtt.size), "missing": self.missing,
