@@ -168,6 +168,14 @@ def test_can_interface_names_driver_and_bitrate(tmp_path, bitrate, poor):
         assert "bitrate=1000000" in found.fix
 
 
+def test_slcan_on_an_ftdi_names_its_latency_timer(tmp_path):
+    add_tty(tmp_path, "ttyUSB0", "ftdi_sio", latency_timer_ms=16)
+    info, found, warning = _advice(tmp_path, "can:slcan:/dev/ttyUSB0?bitrate=1000000")
+    assert (info.kind, info.driver, info.latency_timer_ms) == ("can", "slcan/ftdi_sio", 16)
+    assert found.poor and "latency timer 16 ms" in found.cause
+    assert "devices/ttyUSB0/latency_timer" in found.fix and "ttyUSB0" in warning
+
+
 def test_can_bitrate_from_ip_details():
     out = '[{"ifname":"can0","linkinfo":{"info_data":{"bittiming":{"bitrate":500000}}}}]'
     assert adapters.can_bitrate_from_ip("can0", run=lambda argv: out) == 500_000

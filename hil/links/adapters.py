@@ -191,6 +191,7 @@ def inspect_can(interface: str, channel: str, bitrate: int | None,
         info.description += f" on {tty.description}"
         info.notes.append(f"the slcan adapter's serial side: {tty.description}")
         info.latency_timer_ms = tty.latency_timer_ms
+        info.tty_name = tty.tty_name
         info.driver = f"slcan/{tty.driver}" if tty.driver else "slcan"
         info.sysfs_path = tty.sysfs_path
         return info
@@ -339,6 +340,10 @@ def advice(info: AdapterInfo) -> Advice:
     if info.kind == "pty":
         return Advice("pseudo-terminal: no adapter; the round trip is the board process's and "
                       "the kernel's")
+    if info.kind == "can" and (info.latency_timer_ms or 0) > 1:      # slcan on an FTDI
+        return Advice(f"slcan adapter on an FTDI with latency timer {info.latency_timer_ms} ms: "
+                      f"each answer held up to {info.latency_timer_ms} ms",
+                      latency_timer_fix(info), poor=True)
     if info.kind == "can":
         bitrate = f"{info.can_bitrate} bit/s" if info.can_bitrate else "bitrate unknown"
         text = f"CAN ({info.driver}, {bitrate}): SAMPLE and GATES take ~200-240 us at 1 Mbit/s"

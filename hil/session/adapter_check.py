@@ -7,6 +7,7 @@ rate (an FTDI latency timer above 1 ms, a slow CAN bitrate); the log's metadata 
 """
 from __future__ import annotations
 
+import re
 import sys
 
 from hil.links import adapters
@@ -15,7 +16,7 @@ from hil.links.adapters import AdapterInfo
 
 def checked_link(spec: str) -> bool:
     """A link to a real board's port (or one with a modelled wire)."""
-    return (spec.startswith(("serial:", "can:", "/dev/")) or "wire=" in spec)
+    return spec.startswith(("serial:", "can:", "/dev/")) or re.search(r"[?&]wire=", spec) is not None
 
 
 def check_adapter(spec: str, conn, log=None, warn=None) -> AdapterInfo | None:
