@@ -103,8 +103,8 @@ def test_probe_sets_the_latency_timer_when_asked(board_as, tmp_path, capsys):
     spec = board_as("ttyUSB0", "ftdi_sio", latency_timer_ms=16)
     assert hil_main(["probe", spec, "--samples", "3", "--set-latency-timer", "1",
                      "--sysfs-root", str(tmp_path / "sys")]) == 0
-    out = capsys.readouterr().out
-    assert "latency timer now 1 ms" in out and "latency timer 1 ms" in out
+    captured = capsys.readouterr()
+    assert "latency timer now 1 ms" in captured.err and "latency timer 1 ms" in captured.out
     timer = next((tmp_path / "sys").rglob("latency_timer"))
     assert timer.read_text().strip() == "1"
 

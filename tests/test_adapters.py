@@ -126,6 +126,13 @@ def test_ftdi_at_16ms_names_the_timer_and_the_fix(tmp_path):
     assert warning.startswith("/dev/ttyUSB0: ") and "16 ms" in warning and "fix:" in warning
 
 
+def test_ftdi_without_a_readable_timer_assumes_the_default(tmp_path):
+    add_tty(tmp_path, "ttyUSB0", "ftdi_sio")           # no latency_timer attribute
+    info, found, warning = _advice(tmp_path, "serial:/dev/ttyUSB0")
+    assert info.latency_timer_ms is None and found.poor and "unreadable" in found.cause
+    assert info.expected_wire().name == "ftdi-16ms" and "latency_timer" in found.fix
+
+
 def test_ftdi_at_1ms_needs_no_fix(tmp_path):
     add_tty(tmp_path, "ttyUSB0", "ftdi_sio", latency_timer_ms=1)
     info, found, warning = _advice(tmp_path, "serial:/dev/ttyUSB0")

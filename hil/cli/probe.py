@@ -14,6 +14,7 @@ its frames really held to the model's arrival times, so the probe measures the m
 from __future__ import annotations
 
 import math
+import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -82,7 +83,8 @@ def probe(spec: str, samples: int = DEFAULT_SAMPLES, sysfs_root: Path | None = N
     bare, wire = split_wire(spec)
     info = adapters.inspect_link(bare, root, wire=wire)
     if set_latency_timer_ms is not None:
-        print(adapters.set_latency_timer(info, set_latency_timer_ms, root))
+        print(f"hil probe: {adapters.set_latency_timer(info, set_latency_timer_ms, root)}",
+              file=sys.stderr)
     conn = connect(spec)
     try:
         link = conn.link

@@ -13,15 +13,15 @@ udev rule); ``set_latency_timer`` writes the sysfs file where the user may.
 from __future__ import annotations
 
 import os
-import re
 import stat
 from dataclasses import dataclass, field
 from pathlib import Path
 from urllib.parse import parse_qsl
 
-from hil.links.wire import (FTDI_DEFAULT_LATENCY_TIMER_S, USB_FULL_SPEED_FRAME_S,
-                            USB_HIGH_SPEED_MICROFRAME_S, WireModel, ftdi, parse_wire, PRESETS,
-                            Direction)
+from hil.links.wire import (FTDI_DEFAULT_LATENCY_TIMER_S, PRESETS, USB_HIGH_SPEED_MICROFRAME_S,
+                            WireModel, ftdi)
+
+FTDI_DEFAULT_MS = round(FTDI_DEFAULT_LATENCY_TIMER_S * 1e3)
 
 SYSFS_ROOT = Path("/sys")
 #: ASYNC_LOW_LATENCY in struct serial_struct's flags (linux/tty_flags.h); pyserial's
@@ -73,7 +73,7 @@ class AdapterInfo:
             return self.wire
         baud = self.baud
         if self.kind == "ftdi_sio":
-            timer = self.latency_timer_ms if self.latency_timer_ms is not None else 16
+            timer = self.latency_timer_ms if self.latency_timer_ms is not None else FTDI_DEFAULT_MS
             return ftdi(max(1, min(255, timer)), baud or 2_000_000)
         if self.kind == "cdc_acm":
             name = "cdc-hs" if (self.usb_speed_mbps or 12) >= 480 else "cdc-fs"
@@ -312,8 +312,8 @@ def advice(info: AdapterInfo) -> Advice:
         if info.wire is not None and info.wire.driver == "ftdi_sio":
             timer = round(info.wire.back.latency_s * 1e3)
         if timer is None:
-            return Advice("FTDI adapter, latency timer unreadable (default 16 ms: one answer per "
-                          "16 ms, ~60 periods/s)", latency_timer_fix(info), poor=True)
+            return Advice(f"FTDI adapter, latency timer unreadable (default {FTDI_DEFAULT_MS} ms: "
+                          f"about {rate} in lockstep)", latency_timer_fix(info), poor=True)
         if timer > 1:
             return Advice(f"{modelled}FTDI adapter with latency timer {timer} ms: the chip holds "
                           f"each answer up to {timer} ms, so lockstep runs at most {rate}",
@@ -386,5 +386,4 @@ def set_latency_timer(info: AdapterInfo, ms: int, sysfs_root: Path = SYSFS_ROOT)
 
 __all__ = ["AdapterInfo", "Advice", "inspect_link", "inspect_tty", "inspect_can", "advice",
            "warning", "set_latency_timer", "read_low_latency", "udev_rule", "SYSFS_ROOT",
-           "FTDI_DEFAULT_LATENCY_TIMER_S", "USB_FULL_SPEED_FRAME_S", "parse_wire", "Direction",
            "can_bitrate_from_ip"]

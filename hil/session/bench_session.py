@@ -32,8 +32,8 @@ from protocol.messages import (
 
 from hil.links.registry import BoardConnection, connect
 from hil.logs.recorder import COMMAND_FIELDS, Recorder
-from hil.session.board_params import board_parameters, default_board
 from hil.session.adapter_check import check_adapter
+from hil.session.board_params import board_parameters, default_board
 from hil.session.board_state import BoardState
 from hil.session.control_inputs import ControlInputError, ControlLimits
 from hil.session.cpu_latency import CpuLatencyHold

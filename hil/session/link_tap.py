@@ -308,7 +308,8 @@ class LinkTap:
         from protocol import ccodec
 
         make = getattr(self.link, "sample_exchange", None)
-        if make is None or self.wire is not None or not self._c_codec() or self.link.exchange_target() is None:
+        if (make is None or self.wire is not None or not self._c_codec()
+                or self.link.exchange_target() is None):
             return None
         self._count_with(self.link.exchange_counts)
         return make(ccodec.exchange_sample, self._encoder, self._decoder, self.captured["out"],
@@ -363,9 +364,6 @@ class LinkTap:
                 and self._exchange_counts is not None and self.link.exchange_ready)
 
     def _take_in(self, data: bytes) -> None:
-        self._take_in_now(data)
-
-    def _take_in_now(self, data: bytes) -> None:
         buf = self._partial
         if buf or data[-1] != 0:
             buf += data

@@ -132,7 +132,7 @@ class WirePump:
         with self.arrived:
             delivered = False
             while back and back[0][0] <= now:
-                self.tap._take_in_now(back.popleft()[1])
+                self.tap._take_in(back.popleft()[1])
                 delivered = True
             if delivered:
                 self.arrived.notify_all()
