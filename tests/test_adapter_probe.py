@@ -176,3 +176,58 @@ def test_wire_model_on_a_can_link_is_refused():
     with pytest.raises(SessionError, match="wire=ftdi-1ms needs a byte link"):
         with BenchSession(load_profile(), SessionConfig(link="stub-can?wire=ftdi-1ms")):
             pass
+
+
+# ---------------------------------------------------------------- the pump, alone
+
+class _EchoLink:
+    """A byte link in this process: each frame it is sent is answered by GATES of period 7;
+    ``fail`` makes its next read raise as a broken line does."""
+
+    url = "echo"
+
+    def __init__(self):
+        from protocol.codec import FrameEncoder
+        from protocol.messages import Gates
+
+        self.sent: list[bytes] = []
+        self._answer = FrameEncoder().encode(Gates(7, 0x21))
+        self._pending = b""
+        self.fail = False
+        self.counters = {}
+
+    def send_bytes(self, data):
+        self.sent.append(bytes(data))
+        self._pending += self._answer
+
+    def read_bytes(self, timeout_s=0.0):
+        from protocol.links import LinkError
+
+        if self.fail:
+            raise LinkError("echo: the other end closed the line")
+        data, self._pending = self._pending, b""
+        return data
+
+    def close(self):
+        pass
+
+
+def test_pump_holds_frames_and_hands_over_the_links_error():
+    from protocol.links import LinkError
+    from protocol.messages import Gates, Shutdown
+
+    from hil.links.wire import parse_wire
+    from hil.session.link_tap import LinkTap
+
+    link = _EchoLink()
+    tap = LinkTap(link, wire=parse_wire("fixed-2ms"), delay_frames=True)
+    tap.send(Shutdown())                   # held 2 ms by the pump (the probe's test shows the
+    answer = tap.recv(2.0)                 # holding); a bounded wait, its length not asserted
+    assert answer == Gates(7, 0x21) and len(link.sent) == 1
+    assert tap.counters["wire_mode"] == "held"
+    link.fail = True
+    tap.send(Shutdown())
+    with pytest.raises(LinkError, match="other end closed"):
+        for _ in range(100):               # the error arrives with the thread's next read
+            tap.recv(0.05)
+    tap.close()
