@@ -35,7 +35,7 @@ CAN_DLC = {"SAMPLE": (8,), "GATES": (5,), "DUTY": (8,), "DUTY_LEGS": (8,),
            "TELEMETRY": (8,) * 8}
 SERIAL_OVERHEAD_BYTES = 8           # 4 header + 2 CRC + 1 COBS code byte + 1 delimiter
 UART_BITS_PER_BYTE = 10             # 8N1: start bit, 8 data bits, stop bit
-USB_FULL_SPEED_FRAME_S = 1e-3       # USB 2.0 spec 5.3.3: a frame every 1 ms at full speed
+USB_FULL_SPEED_FRAME_S = 1e-3       # USB 2.0: a frame every 1 ms at full speed
 USB_HIGH_SPEED_MICROFRAME_S = 125e-6    # ... and a microframe every 125 us at high speed
 FTDI_DEFAULT_LATENCY_TIMER_S = 16e-3    # FTDI AN232B-04; Linux ftdi_sio default
 DEFAULT_BAUD = 2_000_000            # what the bench opens a pseudo-terminal's line at
