@@ -96,8 +96,6 @@ def probe(spec: str, samples: int = DEFAULT_SAMPLES, sysfs_root: Path | None = N
         descriptor = getattr(inner, "descriptor", None)
         if info.kind not in ("pty", "process"):
             info.low_latency = adapters.read_low_latency(descriptor() if descriptor else None)
-        if info.kind == "can" and info.can_bitrate is None and info.driver == "socketcan":
-            info.can_bitrate = adapters.can_bitrate_from_ip(info.port)
         hello = _hello(link, period_ns, spec, hello_wait_s)
         report = ProbeReport(spec, _name(hello), info, adapters.advice(info))
         _train(link, samples, answer_wait_s, report)

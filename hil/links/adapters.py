@@ -204,6 +204,8 @@ def inspect_can(interface: str, channel: str, bitrate: int | None,
         elif _read(net / "type") == "280":
             info.driver = "vcan" if channel.startswith("vcan") else info.driver
         info.sysfs_path = str(net)
+        if bitrate is None and sysfs_root == Path("/sys"):    # this machine's interface
+            info.can_bitrate = can_bitrate_from_ip(channel)
     return info
 
 
@@ -218,7 +220,7 @@ def can_bitrate_from_ip(channel: str, run=None) -> int | None:
     try:
         out = json.loads(run(["ip", "-details", "-json", "link", "show", channel]) or "[]")
         return int(out[0]["linkinfo"]["info_data"]["bittiming"]["bitrate"])
-    except (OSError, ValueError, KeyError, IndexError, TypeError, Exception):  # noqa: BLE001
+    except Exception:  # noqa: BLE001 - no ip, no such interface, a virtual one, a timeout
         return None
 
 
