@@ -73,6 +73,16 @@ def test_lockstep_period_of_each_model_by_hand(name, baud, period_s):
     assert model.lockstep_rate_hz() == pytest.approx(1 / period_s, rel=1e-9)
 
 
+def test_a_full_ftdi_packet_goes_without_the_latency_timer():
+    model = parse_wire("ftdi-16ms")
+    # 19 B out (95 us), then 61 B: under a packet, the timer: 95 + 305 us + 16 ms -> 17 ms
+    assert model.exchange_s(0.0, 19, 61) == pytest.approx(17e-3)
+    # 62 B fill the packet: 95 + 310 us -> the next 1 ms frame, timer or not; 77 B alike
+    assert model.exchange_s(0.0, 19, 62) == pytest.approx(1e-3)
+    assert model.exchange_s(0.0, 19, 77) == pytest.approx(1e-3)
+    assert parse_wire("cdc-fs").flush_bytes is None
+
+
 def test_shortest_realtime_period_is_the_worst_phase():
     # a SAMPLE sent just after a frame boundary: 16 ms + 160 us + almost a whole 1 ms frame
     assert parse_wire("ftdi-16ms").shortest_realtime_period_s() == pytest.approx(17.16e-3)

@@ -318,7 +318,8 @@ def advice(info: AdapterInfo) -> Advice:
                           f"about {rate} in lockstep)", latency_timer_fix(info), poor=True)
         if timer > 1:
             return Advice(f"{modelled}FTDI adapter with latency timer {timer} ms: the chip holds "
-                          f"each answer up to {timer} ms, so lockstep runs at most {rate}",
+                          f"each answer up to {timer} ms (unless 62 bytes fill a USB packet "
+                          f"first), so lockstep runs at most {rate} with answers alone",
                           latency_timer_fix(info), poor=True)
         return Advice(f"{modelled}FTDI adapter, latency timer 1 ms (the least): about {rate} in "
                       f"lockstep; for more, a board with a native high-speed USB port "

@@ -38,6 +38,7 @@ UART_BITS_PER_BYTE = 10             # 8N1: start bit, 8 data bits, stop bit
 USB_FULL_SPEED_FRAME_S = 1e-3       # USB 2.0: a frame every 1 ms at full speed
 USB_HIGH_SPEED_MICROFRAME_S = 125e-6    # ... and a microframe every 125 us at high speed
 FTDI_DEFAULT_LATENCY_TIMER_S = 16e-3    # FTDI AN232B-04; Linux ftdi_sio default
+FTDI_PACKET_DATA_BYTES = 62            # a full-speed packet's 64 bytes less 2 status bytes
 DEFAULT_BAUD = 2_000_000            # what the bench opens a pseudo-terminal's line at
 
 
@@ -88,13 +89,16 @@ def lockstep_rate_table(names=("ftdi-16ms", "ftdi-4ms", "ftdi-1ms", "cp210x", "c
                                "cdc-fs", "cdc-hs")) -> str:
     """docs/adapters.md's table of what each modelled adapter allows (GATES answers at
     2 Mbaud, the board's own computation not counted; a test holds the doc to it)."""
+    chatty = serial_frame_bytes("GATES") + serial_frame_bytes("TELEMETRY")
     rows = ["| wire model | driver | one lockstep period | periods/s | 1 s at 20 kHz takes | "
-            "shortest real-time period |", "|---|---|---|---|---|---|"]
+            "periods/s with TELEMETRY every period | shortest real-time period |",
+            "|---|---|---|---|---|---|---|"]
     for name in names:
         model = parse_wire(name)
         period = model.lockstep_period_s()
         rows.append(f"| `{name}` | {model.driver} | {_us(period)} | {1 / period:.0f} | "
-                    f"{20_000 * period:.1f} s | {_us(model.shortest_realtime_period_s())} |")
+                    f"{20_000 * period:.1f} s | {model.lockstep_rate_hz_with(chatty):.0f} | "
+                    f"{_us(model.shortest_realtime_period_s())} |")
     return "\n".join(rows)
 
 
@@ -112,9 +116,10 @@ class Direction:
     latency_s: float = 0.0
     grid_s: float = 0.0
 
-    def arrival(self, t_s: float) -> float:
-        """When something handed over at t_s reaches the far side (grid-aligned)."""
-        t = t_s + self.latency_s
+    def arrival(self, t_s: float, held: bool = True) -> float:
+        """When something handed over at t_s reaches the far side (grid-aligned); ``held``
+        False: without the latency (an FTDI packet that filled up goes at once)."""
+        t = t_s + (self.latency_s if held else 0.0)
         if self.grid_s > 0.0:
             # the host takes it at the next (micro)frame after it is ready: strictly later,
             # also from a boundary (rounded to a millionth of a frame against float noise)
@@ -130,13 +135,20 @@ class WireModel:
     back: Direction = Direction()           # board -> bench
     baud: int | None = DEFAULT_BAUD   # None: a native USB port (no UART in the path)
     note: str = ""
+    # an adapter that sends a full USB packet at once, whatever its latency: the data bytes
+    # of one packet (FTDI full speed: 64-byte packets less 2 status bytes = 62)
+    flush_bytes: int | None = None
 
     def sample_arrival_s(self, t_s: float, out_bytes: float) -> float:
         """SAMPLE sent at t_s reaches the board (USB out, then the adapter's UART)."""
         return self.out.arrival(t_s) + self._line(out_bytes)
 
     def answer_arrival_s(self, t_s: float, in_bytes: float) -> float:
-        """An answer the board starts sending at t_s reaches the bench (UART, then USB in)."""
+        """An answer the board starts sending at t_s reaches the bench (UART, then USB in).
+        What the board sends with it counts: ``flush_bytes`` or more (GATES + TELEMETRY, 77
+        bytes) fill a packet, which goes without the latency, the answer at its head."""
+        if self.flush_bytes is not None and in_bytes >= self.flush_bytes:
+            return self.back.arrival(t_s + self._line(self.flush_bytes), held=False)
         return self.back.arrival(t_s + self._line(in_bytes))
 
     def _line(self, nbytes: float) -> float:
@@ -195,14 +207,15 @@ def _grid(grid_s: float) -> str:
 
 
 def ftdi(latency_timer_ms: int, baud: int = DEFAULT_BAUD) -> WireModel:
-    """An FTDI full-speed adapter (FT232R, FT231X, ...): the host's transfer waits for a 1 ms
-    frame; the chip holds what the board sends until its latency timer expires (or 62 bytes
-    are buffered: not modelled, so a board sending TELEMETRY every period sees less)."""
+    """An FTDI full-speed adapter (FT232R, FT231X, ...): the chip holds what the board sends
+    until its latency timer expires or 62 bytes fill a USB packet (FTDI AN232B-04), then the
+    host takes it at the next 1 ms frame."""
     if not 1 <= latency_timer_ms <= 255:
         raise ValueError(f"FTDI latency timer {latency_timer_ms} ms is not 1..255 ms")
     return WireModel(f"ftdi-{latency_timer_ms}ms", "ftdi_sio",
                      out=Direction(),
-                     back=Direction(latency_timer_ms * 1e-3, USB_FULL_SPEED_FRAME_S), baud=baud)
+                     back=Direction(latency_timer_ms * 1e-3, USB_FULL_SPEED_FRAME_S), baud=baud,
+                     flush_bytes=FTDI_PACKET_DATA_BYTES)
 
 
 def _fixed(text: str) -> float:
