@@ -32,8 +32,8 @@ def _driver_link(root: Path, where: Path, bus: str, driver: str) -> None:
 def add_tty(root: Path, name: str, driver: str, latency_timer_ms: int | None = None,
             speed: str = "12", bus_port: str | None = None) -> Path:
     """/sys/class/tty/NAME for a port of ``driver``; returns the port's device directory."""
-    usb, interface = _usb_device(root, bus_port or f"1-{len(list(root.glob('devices/*/*/usb1/*'))) + 1}",
-                                 driver, speed)
+    ports = len(list(root.glob("devices/*/*/usb1/*")))
+    usb, interface = _usb_device(root, bus_port or f"1-{ports + 1}", driver, speed)
     if driver == "cdc_acm":         # the tty's device is the interface cdc_acm binds to
         device = interface
         _driver_link(root, interface, "usb", driver)

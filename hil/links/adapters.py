@@ -38,7 +38,9 @@ UDEV_RULE_FILE = "/etc/udev/rules.d/99-ftdi-latency.rules"
 class AdapterInfo:
     """What is between the bench and the board, as far as the host can tell."""
 
-    kind: str                      # ftdi_sio | cdc_acm | cp210x | ch341 | pty | can | serial | unknown | model
+    # ftdi_sio | cdc_acm | cp210x | ch341 (a USB-serial driver), serial (another tty), pty,
+    # can, process (a board in this process or an emulator), unknown (no sysfs entry)
+    kind: str
     port: str = ""                 # /dev/ttyUSB0, can0, ...
     driver: str = ""
     description: str = ""
@@ -131,10 +133,10 @@ def inspect_tty(device: str, sysfs_root: Path = SYSFS_ROOT) -> AdapterInfo:
     if not driver:   # cdc_acm binds to the interface the tty's device link points at
         driver = os.path.basename(os.path.realpath(device_dir.parent / "driver")) \
             if (device_dir.parent / "driver").exists() else ""
+    description = KNOWN_DRIVERS.get(driver, f"serial port (driver {driver or 'unknown'})")
     info = AdapterInfo(driver if driver in KNOWN_DRIVERS else "serial", port=device,
-                       driver=driver, description=KNOWN_DRIVERS.get(driver, f"serial port "
-                                                                    f"(driver {driver or 'unknown'})"),
-                       sysfs_path=str(device_dir), tty_name=name)
+                       driver=driver, description=description, sysfs_path=str(device_dir),
+                       tty_name=name)
     timer = _read(device_dir / "latency_timer")
     if timer is not None and timer.isdigit():
         info.latency_timer_ms = int(timer)

@@ -264,7 +264,8 @@ def parse_wire(text: str, baud: int | None = None) -> WireModel:
         except ValueError:
             each = None
         if each is not None:
-            return WireModel(name, "", out=Direction(each, 0.0), back=Direction(each, 0.0), baud=line)
+            return WireModel(name, "", out=Direction(each, 0.0), back=Direction(each, 0.0),
+                             baud=line)
     raise ValueError(f"unknown wire model '{text}'; expected one of: {', '.join(WIRE_NAMES)} "
                      f"(optionally @BAUD)")
 

@@ -16,7 +16,8 @@ from hil.links.adapters import AdapterInfo
 
 def checked_link(spec: str) -> bool:
     """A link to a real board's port (or one with a modelled wire)."""
-    return spec.startswith(("serial:", "can:", "/dev/")) or re.search(r"[?&]wire=", spec) is not None
+    return (spec.startswith(("serial:", "can:", "/dev/"))
+            or re.search(r"[?&]wire=", spec) is not None)
 
 
 def check_adapter(spec: str, conn, log=None, warn=None) -> AdapterInfo | None:
