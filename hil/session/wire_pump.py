@@ -92,28 +92,27 @@ class WirePump:
         try:
             while not self._stop:
                 self._release(link, time.monotonic())
+                if fd is None:      # a library in this process answers within the call
+                    self._read(link)
                 with self.lock:
                     due = self._next_due()
                 wait = IDLE_WAIT_S if due is None else max(0.0, due - time.monotonic())
-                if fd is not None:
-                    ready = select.select([fd, self._wake_r], [], [], wait)[0]
-                    if self._wake_r in ready:
-                        self._drain_wake()
-                    readable = fd in ready
-                else:       # a link without a descriptor (a library in this process)
-                    ready = select.select([self._wake_r], [], [], wait)[0]
-                    if ready:
-                        self._drain_wake()
-                    readable = True
-                if readable and not self._stop:
-                    data = link.read_bytes(0.0)
-                    if data:
-                        with self.lock:
-                            self._queue("in", data, time.monotonic())
+                ready = select.select([self._wake_r] if fd is None else [fd, self._wake_r],
+                                      [], [], wait)[0]
+                if self._wake_r in ready:
+                    self._drain_wake()
+                if fd is not None and fd in ready and not self._stop:
+                    self._read(link)
         except BaseException as exc:  # noqa: BLE001 - handed to the caller's next send/recv
             with self.arrived:
                 self.error = exc
                 self.arrived.notify_all()
+
+    def _read(self, link) -> None:
+        data = link.read_bytes(0.0)
+        if data:
+            with self.lock:
+                self._queue("in", data, time.monotonic())
 
     def _drain_wake(self) -> None:
         try:
