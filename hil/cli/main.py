@@ -18,7 +18,7 @@ from pathlib import Path
 # main() turns it off before anything else is imported (see main).
 
 EXIT_PASS, EXIT_FAIL, EXIT_ERROR = 0, 1, 2
-COMMANDS = ("run", "serve", "log", "bench", "plans", "sweep", "init")
+COMMANDS = ("run", "serve", "log", "bench", "plans", "sweep", "init", "probe")
 # hil.logs.mcap_writer.COMPRESSIONS, spelt out so that parsing a command line does not import
 # the writer (tests/test_cli.py holds the two together)
 LOG_COMPRESSIONS = ("lz4", "zstd", "none")
@@ -192,6 +192,16 @@ def _parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
             from hil.cli.init import add_arguments as init_arguments
 
             init_arguments(init)
+
+    if only in (None, "probe"):
+        probe = sub.add_parser("probe", help="measure what the wire to a board allows",
+                               description="HELLO, then a train of SAMPLEs against the board: the "
+                                           "round trip, the lockstep rate and real-time period it "
+                                           "allows, what the port is (sysfs) and the fix when the "
+                                           "adapter is slow (docs/adapters.md).")
+        from hil.cli.probe import add_arguments as probe_arguments
+
+        probe_arguments(probe)
     return parser
 
 
@@ -254,6 +264,10 @@ def _main(argv: list[str] | None, program: bool) -> int:
             from hil.cli.init import init_command
 
             return init_command(args)
+        if args.command == "probe":
+            from hil.cli.probe import probe_command
+
+            return probe_command(args)
     except KeyboardInterrupt:
         print("hil: interrupted", file=sys.stderr)
         return EXIT_ERROR

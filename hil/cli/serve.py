@@ -244,6 +244,11 @@ def _serve(args, profile, config, mailbox, port, live, chunk, total, pace: str) 
             # on every exit, a terminal or not, an error or not
             print(summary(session, ran, profile.control_period_s, time.monotonic() - started),
                   file=sys.stderr, flush=True)
+            wire = session.tap.wire_stats() if session.tap is not None else {}
+            if "wire_projected_rate_hz" in wire:        # lockstep through a modelled wire
+                print(f"hil serve: through {wire['wire_model']}: {wire['wire_modelled_s']:.3f} s "
+                      f"of modelled wire time, {wire['wire_projected_rate_hz']:.0f} periods/s "
+                      f"projected (docs/adapters.md)", file=sys.stderr)
     if args.log is not None:      # closed with the session: its final size
         print(f"hil serve: log {args.log} ({LogRate(args.log, 1.0).size() / 2**20:.1f} MiB)",
               file=sys.stderr, flush=True)

@@ -65,6 +65,7 @@ class BoardConnection:
     hello_wait_s: float | None = None
     answer_wait_min_s: float | None = None
     process: Any = None                       # subprocess.Popen of the board, if any
+    wire: Any = None                          # hil.links.wire.WireModel from `wire=`, if any
     _cleanups: list[Callable[[], None]] = field(default_factory=list)
     _output: Callable[[], list[str]] | None = None   # the board process's last output lines
 
@@ -389,8 +390,39 @@ def link_types() -> list[str]:
             *sorted(set(entry_point_types()) - set(BUILTIN_TYPES))]
 
 
+def split_wire(spec: str):
+    """(the link string without its ``wire=`` option, the WireModel it names or None): any
+    link type takes ``wire=NAME`` (hil/links/wire.py, docs/adapters.md)."""
+    head, sep, query = spec.partition("?")
+    if not sep:
+        return spec, None
+    parts = query.split("&")
+    wires = [p[len("wire="):] for p in parts if p.startswith("wire=")]
+    if not wires:
+        return spec, None
+    if len(wires) > 1:
+        raise LinkError(f"link '{spec}': option(s) wire given more than once")
+    from hil.links.wire import parse_wire
+
+    rest = [p for p in parts if not p.startswith("wire=")]
+    baud = next((p.partition("=")[2] for p in rest if p.startswith(("baud=", "baudrate="))), "")
+    try:
+        model = parse_wire(wires[0], int(baud) if baud.isdigit() else None)
+    except ValueError as exc:
+        raise LinkError(f"link '{spec}': {exc}") from None
+    return head + ("?" + "&".join(rest) if rest else ""), model
+
+
 def connect(spec: str) -> BoardConnection:
-    """Opens the board named by ``spec``; raises LinkError naming what was wrong."""
+    """Opens the board named by ``spec``; raises LinkError naming what was wrong. A ``wire=``
+    option (any link type) is taken off and set as the connection's ``wire``."""
+    spec, wire = split_wire(spec)
+    conn = _connect(spec)
+    conn.wire = wire
+    return conn
+
+
+def _connect(spec: str) -> BoardConnection:
     conn = _alias(spec)
     if conn is not None:
         return conn

@@ -32,6 +32,7 @@ from protocol.messages import (
 
 from hil.links.registry import BoardConnection, connect
 from hil.logs.recorder import COMMAND_FIELDS, Recorder
+from hil.session.adapter_check import check_adapter
 from hil.session.board_params import board_parameters, default_board
 from hil.session.board_state import BoardState
 from hil.session.control_inputs import ControlInputError, ControlLimits
@@ -200,7 +201,12 @@ class BenchSession:
             self.recorder.attach_log(self.log)
         self.conn = connect(cfg.link)
         if cfg.tap_link and tappable(self.conn.link):
-            self.tap = self.conn.link = LinkTap(self.conn.link, seed=cfg.seed)
+            self.tap = self.conn.link = LinkTap(self.conn.link, seed=cfg.seed, wire=self.conn.wire,
+                                                delay_frames=cfg.mode == "realtime")
+        elif self.conn.wire is not None:
+            raise SessionError(f"{self._where()}: wire={self.conn.wire.name} needs a byte link "
+                               "with the link tap (serial framing), not CAN frames")
+        self.adapter = check_adapter(cfg.link, self.conn, self.log)   # docs/adapters.md
         self._apply_link_waits()
         try:
             self._handshake()

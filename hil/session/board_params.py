@@ -24,7 +24,7 @@ STUB_LINKS = ("stub", "stub-pty", "stub-can", "qemu")
 def default_board(link: str | None) -> BoardFile:
     """The board file a link gets when none is given: the stub's for the stub's links, else a
     board written from SPEC.md alone (only the required parameters are pushed)."""
-    if (link or "stub") in STUB_LINKS:
+    if (link or "stub").partition("?")[0] in STUB_LINKS:     # (stub-pty?wire=...: the stub)
         return load_board(STUB_BOARD_FILE)
     return spec_board()
 

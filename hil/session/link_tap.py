@@ -19,6 +19,15 @@ and the decoders' own tests cover.
 
 Links that carry frames rather than bytes (CAN) are not tapped.
 
+A wire model (hil.links.wire.WireModel: ``wire=ftdi-16ms`` on the link) puts an adapter's
+latency and line time between the two. In real time (``delay_frames``) each frame is really
+held until its modelled arrival (the USB frame grid, the latency timer, the baud rate's
+serialisation, one frame after another on each line) by a thread that owns the link
+(hil/session/wire_pump.py).
+In lockstep nothing is held: each period's traffic is accounted on a modelled clock
+(``wire_stats``: the modelled wire time, and the lockstep rate projected from it and the
+measured time), so a run "through an FTDI at 16 ms" costs no 16 ms sleeps.
+
 Cost: the frames go through the bench's codec (protocol.codec_impl(): the firmware's C codec
 as an extension module when built). While no link fault is active a frame out is encoded,
 captured and sent, and the bytes in are captured and decoded as one chunk (their frames counted
@@ -70,7 +79,7 @@ def tappable(link) -> bool:
 class LinkTap:
     """Same interface as a link (send, recv, close, counters), plus faults and capture."""
 
-    def __init__(self, link, seed: int = 0):
+    def __init__(self, link, seed: int = 0, wire=None, delay_frames: bool = False):
         self.link = link
         self.url = getattr(link, "url", "")
         codec = codec_impl()
@@ -98,6 +107,18 @@ class LinkTap:
         # counters already have
         self._direct_counts = None
         self._direct_settled = (0, 0, 0)
+        # the wire model (None: none): frames held in real time, time accounted in lockstep
+        self.wire = wire
+        self._wire_delay = wire is not None and delay_frames
+        self._pump = None
+        if self._wire_delay:
+            from hil.session.wire_pump import WirePump
+
+            self._pump = WirePump(self, wire)
+        self._wire_clock_s = 0.0          # the modelled clock of the lockstep accounting
+        self._wire_marks = None           # captured lengths at the last tick
+        self._wire_started = None         # monotonic time of the first accounted tick
+        self._wire_periods = 0
 
     # ---------------------------------------------------------------- faults
     def set_fault(self, name: str, fault: LinkFault) -> None:
@@ -113,7 +134,16 @@ class LinkTap:
 
     def tick(self, period: int) -> None:
         """Called once per period: lifts expired faults, releases delayed frames."""
+        if self._pump is not None:
+            with self._pump.lock:       # the pump thread decodes under the same lock
+                self._tick(period)
+        else:
+            self._tick(period)
+
+    def _tick(self, period: int) -> None:
         self.period = period
+        if self.wire is not None and not self._wire_delay:
+            self._wire_account()
         if self.faults:
             expired = [n for n, f in self.faults.items()
                        if f.until_period is not None and period >= f.until_period]
@@ -187,12 +217,47 @@ class LinkTap:
                 frames = swapped
         return frames
 
+    # ------------------------------------------------------------ the wire model
+    def _wire_account(self) -> None:
+        """Lockstep: the traffic since the last tick as one modelled exchange (SAMPLE and
+        whatever else went out, then the answers), on the model's own clock."""
+        marks = (len(self.captured["out"]), len(self.captured["in"]))
+        if self._wire_marks is not None:
+            out_b, in_b = marks[0] - self._wire_marks[0], marks[1] - self._wire_marks[1]
+            if out_b or in_b:
+                self._wire_clock_s += self.wire.exchange_s(self._wire_clock_s, out_b, in_b)
+                self._wire_periods += 1
+        else:
+            self._wire_started = time.monotonic()
+        self._wire_marks = marks
+
+    def wire_stats(self) -> dict:
+        """The wire model's figures: in lockstep the modelled wire time of the periods run and
+        the lockstep rate it projects (modelled wire time plus the time really measured)."""
+        if self.wire is None:
+            return {}
+        stats = {"wire_model": self.wire.name, "wire_mode": "held" if self._wire_delay
+                 else "accounted"}
+        if not self._wire_delay and self._wire_periods:
+            measured = time.monotonic() - self._wire_started
+            periods = self._wire_periods
+            stats.update(wire_periods=periods, wire_modelled_s=self._wire_clock_s,
+                         wire_measured_s=measured,
+                         wire_projected_rate_hz=periods / (self._wire_clock_s + measured))
+        return stats
+
+    def _send_out(self, frame: bytes) -> None:
+        if self._pump is not None:
+            self._pump.send(frame)
+        else:
+            self.link.send_bytes(frame)
+
     # ------------------------------------------------------------ data paths
     def _deliver(self, direction: str, frame: bytes) -> None:
         self.captured[direction] += frame
         self.captured_frames[direction] += 1
         if direction == "out":
-            self.link.send_bytes(frame)
+            self._send_out(frame)
         else:
             self.inbox.extend(self._decoder.feed(frame))
 
@@ -205,6 +270,10 @@ class LinkTap:
 
     def send(self, msg) -> None:
         frame = self._encoder.encode(msg)
+        if self._pump is not None:
+            with self._pump.lock:       # the pump thread counts and decodes under it too
+                self._pass("out", frame)
+            return
         if self.faults:
             self._pass("out", frame)
             return
@@ -239,7 +308,8 @@ class LinkTap:
         from protocol import ccodec
 
         make = getattr(self.link, "sample_exchange", None)
-        if make is None or not self._c_codec() or self.link.exchange_target() is None:
+        if (make is None or self.wire is not None or not self._c_codec()
+                or self.link.exchange_target() is None):
             return None
         self._count_with(self.link.exchange_counts)
         return make(ccodec.exchange_sample, self._encoder, self._decoder, self.captured["out"],
@@ -268,7 +338,8 @@ class LinkTap:
     def direct_ready(self) -> bool:
         """No link fault and nothing held: the C loop may read and write the link's descriptor
         itself (a half-read frame stays in the buffer it shares with this tap)."""
-        return not self.faults and not self._held and self.link.descriptor() is not None
+        return (not self.faults and not self._held and self.wire is None
+                and self.link.descriptor() is not None)
 
     def settle_direct(self) -> None:
         """What the C loop wrote and read on the descriptor since the last call, added to the
@@ -289,7 +360,7 @@ class LinkTap:
         """No link fault, nothing held, no half-read frame, and the link has nothing of its own
         waiting: the C exchange may bypass the tap (messages already queued stay first: the
         exchange appends behind them)."""
-        return (not self.faults and not self._held and not self._partial
+        return (not self.faults and not self._held and not self._partial and self.wire is None
                 and self._exchange_counts is not None and self.link.exchange_ready)
 
     def _take_in(self, data: bytes) -> None:
@@ -322,6 +393,8 @@ class LinkTap:
         inbox = self.inbox
         if inbox:
             return inbox.popleft()
+        if self._pump is not None:
+            return self._pump.recv(inbox, timeout_s)
         if timeout_s is None:
             deadline = remaining = None
         else:
@@ -339,6 +412,12 @@ class LinkTap:
                     return None
 
     def take_capture(self) -> dict[str, tuple[bytes, int]]:
+        if self._pump is not None:
+            with self._pump.lock:
+                return self._take_capture()
+        return self._take_capture()
+
+    def _take_capture(self) -> dict[str, tuple[bytes, int]]:
         counts = self._exchange_counts
         if counts is not None:          # what the C exchange captured since the last time
             out0, in0 = self._exchange_taken
@@ -350,6 +429,8 @@ class LinkTap:
             out[d] = (bytes(self.captured[d]), self.captured_frames[d])
             self.captured[d].clear()
             self.captured_frames[d] = 0
+        if self._wire_marks is not None:
+            self._wire_marks = (0, 0)
         return out
 
     @property
@@ -357,9 +438,12 @@ class LinkTap:
         counters = dict(self.link.counters)
         counters.update(self._decoder.counters)  # the tap decodes what the bench receives
         counters.update({k: v for k, v in self.stats.items() if v})
+        counters.update(self.wire_stats())
         return counters
 
     def close(self) -> None:
+        if self._pump is not None:
+            self._pump.close()
         self.link.close()
 
 
