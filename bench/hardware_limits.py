@@ -80,18 +80,21 @@ def _modelled() -> dict:
     }
 
 
-_M = _modelled()
-R_WARM_OHM = _M["r_warm_ohm"]
-R_BOARD_OHM = _M["r_board_ohm"]
-CURRENT_GAIN = _M["current_gain"]
-VDC_GAIN, VDC_OFFSET_V = _M["vdc_gain"], _M["vdc_offset_v"]
-L_H = _M["l_h"]
-PSI_F_WB = _M["psi_f_wb"]
-DAMPING = _M["damping"]
-DRIFT_W0 = _M["drift_w0"]
-POLE_PAIRS = _M["pole_pairs"]
-DEVICE_DROP_V = _M["device_drop_v"]  # compensated by the board with its nominal value, unscaled
-RS_ID_VDC_V = _M["rs_id_vdc_v"]      # the link while the board identifies R (before any sag)
+_NAMES = {"R_WARM_OHM": "r_warm_ohm", "R_BOARD_OHM": "r_board_ohm", "CURRENT_GAIN": "current_gain",
+          "VDC_GAIN": "vdc_gain", "VDC_OFFSET_V": "vdc_offset_v", "L_H": "l_h",
+          "PSI_F_WB": "psi_f_wb", "DAMPING": "damping", "DRIFT_W0": "drift_w0",
+          "POLE_PAIRS": "pole_pairs", "DEVICE_DROP_V": "device_drop_v",
+          "RS_ID_VDC_V": "rs_id_vdc_v"}
+
+
+def _load() -> None:
+    """Fills the module's constants (R_WARM_OHM, ... RS_ID_VDC_V) from the files, once: at the
+    first call, not at import (an installed copy without the repository's files imports)."""
+    if "R_WARM_OHM" not in globals():
+        values = _modelled()
+        globals().update({name: values[key] for name, key in _NAMES.items()})
+
+
 RS_ID_SIGMA_OHM = 0.5e-3        # the identification's spread, 1 sigma (docs/stub.md)
 
 
@@ -99,6 +102,7 @@ def operating_point(rpm: float, vdc_v: float, flux_ref_wb: float, *, load_nm: fl
                     torque_estimate_nm: float | None = None) -> dict:
     """The steady state at `rpm`: with the load setting the true torque, or with the board
     holding its torque estimate (at its limit)."""
+    _load()
     w_e = rpm / 60 * 2 * math.pi * POLE_PAIRS
     e_v = (VDC_GAIN * vdc_v + VDC_OFFSET_V) / vdc_v - 1
     d_r = R_WARM_OHM - CURRENT_GAIN * R_BOARD_OHM
@@ -132,25 +136,35 @@ def operating_point(rpm: float, vdc_v: float, flux_ref_wb: float, *, load_nm: fl
     return state(lo)
 
 
-def e_v_of(vdc_v: float, vdc_gain: float = VDC_GAIN, vdc_offset_v: float = VDC_OFFSET_V) -> float:
+def e_v_of(vdc_v: float, vdc_gain: float | None = None, vdc_offset_v: float | None = None) -> float:
     """The DC-link reading's relative error at vdc_v."""
+    _load()
+    vdc_gain = VDC_GAIN if vdc_gain is None else vdc_gain
+    vdc_offset_v = VDC_OFFSET_V if vdc_offset_v is None else vdc_offset_v
     return (vdc_gain * vdc_v + vdc_offset_v) / vdc_v - 1
 
 
-def r_identified(vdc_v: float = RS_ID_VDC_V, r_plant_ohm: float = R_WARM_OHM,
-                 current_gain: float = CURRENT_GAIN, vdc_gain: float = VDC_GAIN,
-                 vdc_offset_v: float = VDC_OFFSET_V) -> float:
+def r_identified(vdc_v: float | None = None, r_plant_ohm: float | None = None,
+                 current_gain: float | None = None, vdc_gain: float | None = None,
+                 vdc_offset_v: float | None = None) -> float:
     """What the start-up identification finds: R through the board's own scales."""
+    _load()
+    vdc_v = RS_ID_VDC_V if vdc_v is None else vdc_v
+    r_plant_ohm = R_WARM_OHM if r_plant_ohm is None else r_plant_ohm
+    current_gain = CURRENT_GAIN if current_gain is None else current_gain
     return (1 + e_v_of(vdc_v, vdc_gain, vdc_offset_v)) * r_plant_ohm / current_gain
 
 
 def operating_point_2(rpm: float, vdc_v: float, flux_ref_wb: float, *, load_nm: float,
-                      r_board_ohm: float, r_plant_ohm: float = R_WARM_OHM,
-                      current_gain: float = CURRENT_GAIN, vdc_gain: float = VDC_GAIN,
-                      vdc_offset_v: float = VDC_OFFSET_V) -> dict:
+                      r_board_ohm: float, r_plant_ohm: float | None = None,
+                      current_gain: float | None = None, vdc_gain: float | None = None,
+                      vdc_offset_v: float | None = None) -> dict:
     """The second derivation's steady state at `rpm` with the load setting the true torque
     (plan 05's case): the exact drift-compensation pull on the scaled estimate and the device
     drop's unscaled compensation included (module docstring)."""
+    _load()
+    r_plant_ohm = R_WARM_OHM if r_plant_ohm is None else r_plant_ohm
+    current_gain = CURRENT_GAIN if current_gain is None else current_gain
     w_e = rpm / 60 * 2 * math.pi * POLE_PAIRS
     e_v = e_v_of(vdc_v, vdc_gain, vdc_offset_v)
     g = current_gain
@@ -197,6 +211,7 @@ def plan05_rs_id() -> dict:
     same model with the board's cold R in the three cases plan 05's first run measured (known
     when this was written: arctan 2.64 deg RMS, 0.78 with R exact, 1.48 with the DC-link
     reading exact); they test the model, the limits do not come from them."""
+    _load()
     r_id = r_identified()
     point = operating_point_2(1500, 70.0, 0.099, load_nm=1.0, r_board_ohm=r_id)
     spread = [operating_point_2(1500, 70.0, 0.099, load_nm=1.0, r_board_ohm=r_id + k * RS_ID_SIGMA_OHM)
@@ -230,6 +245,7 @@ def q_axis_pull(rpm: float = 1500, vdc_v: float = 70.0, flux_ref_wb: float = 0.0
     solved without linearising (which also holds the drop term and the resistance error's own
     part with the cold R), and the angle the linearised pull turns the rotor flux by,
     atan(pull / psi_f)."""
+    _load()
     w_e = rpm / 60 * 2 * math.pi * POLE_PAIRS
     out = {}
     for name, r_board in (("cold_r_first_run", R_BOARD_OHM), ("r_identified", r_identified())):
@@ -252,6 +268,7 @@ def q_axis_pull(rpm: float = 1500, vdc_v: float = 70.0, flux_ref_wb: float = 0.0
 def ramp_drift(rpm_a: float, rpm_b: float, torque_limit_nm: float = 2.0) -> dict:
     """On the torque-limited ramp: how fast the estimated flux angle drifts against the rotor,
     d(theta_hat - theta_r)/dw, and the speed-estimate bias and extra lag it gives."""
+    _load()
     a = operating_point(rpm_a, 70.0, 0.099, torque_estimate_nm=torque_limit_nm)
     b = operating_point(rpm_b, 70.0, 0.099, torque_estimate_nm=torque_limit_nm)
     dw = (rpm_b - rpm_a) / 60 * 2 * math.pi
@@ -263,6 +280,7 @@ def ramp_drift(rpm_a: float, rpm_b: float, torque_limit_nm: float = 2.0) -> dict
 
 
 def run(quick: bool = False) -> dict:
+    _load()
     return {
         "plan01_torque_limit_at_1500rpm": operating_point(1500, 70.0, 0.099, torque_estimate_nm=2.0),
         "plan02_3000rpm_1Nm": operating_point(3000, 70.0, 0.099, load_nm=1.0),

@@ -616,7 +616,7 @@ OUTCOME_KINDS = (
     ("no_hello", "no HELLO from the board"),
     ("protocol_version", "protocol version"),
     ("role", "in its HELLO; a controller is role"),
-    ("capability", "advertises neither GATES nor DUTY"),
+    ("capability", "advertises none of GATES, DUTY and DUTY_LEGS"),
     ("capability", "lacks capability"),
     ("control_period", "was built for a control period"),
     ("parameter", "no PARAM_VALUE for"),

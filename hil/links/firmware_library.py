@@ -40,8 +40,6 @@ from __future__ import annotations
 
 import ctypes
 import os
-import shutil
-import tempfile
 from array import array
 from collections import deque
 from functools import partial
@@ -157,6 +155,11 @@ def _memfd_copy(data: bytes, where: str) -> tuple[ctypes.CDLL, int] | None:
 
 def _tempfile_copy(path: Path, where: str) -> ctypes.CDLL:
     """dlopen of a copy in a private temporary directory, removed at once after loading."""
+    # imported here: the memfd path (every Linux since 3.17) needs neither, and shutil brings
+    # bz2 and lzma into every `hil run` start-up
+    import shutil
+    import tempfile
+
     tmp = tempfile.mkdtemp(prefix="hil-fw-")
     try:
         copy = Path(tmp) / path.name
