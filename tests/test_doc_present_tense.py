@@ -39,14 +39,7 @@ def test_docs_describe_the_present(path):
     assert history(path.read_text(encoding="utf-8")) == [], path.name
 
 
-def _readme_marks():
-    if history((REPO / "README.md").read_text(encoding="utf-8")):
-        return [pytest.mark.xfail(strict=True, reason="README.md still narrates runs; it is "
-                                  "being rewritten (remove this mark then)")]
-    return []
-
-
-@pytest.mark.parametrize("path", [pytest.param(REPO / "README.md", marks=_readme_marks())],
+@pytest.mark.parametrize("path", [REPO / "README.md"],
                          ids=["README.md"])
 def test_readme_describes_the_present(path):
     assert history(path.read_text(encoding="utf-8")) == []

@@ -343,6 +343,7 @@ def parse_link(spec: str, plugin_types: tuple[str, ...] = ()) -> tuple[str, str,
     opening anything (no file, port or program needs to exist): LinkError names what is wrong.
     plugin_types: entry-point type names to accept besides the installed ones.
     The docs' examples are parsed with it (tests/test_doc_examples.py)."""
+    spec, _wire = split_wire(spec)            # any link takes wire=NAME (hil/links/wire.py)
     if spec in ("stub", "stub-pty", "stub-can", "qemu"):
         return spec, "", {}
     scheme, sep, rest = spec.partition(":")
