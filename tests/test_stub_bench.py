@@ -11,7 +11,7 @@ from bench.stub import STUB, instructions_per_step
 
 pytestmark = pytest.mark.skipif(shutil.which("valgrind") is None, reason="needs valgrind")
 
-# Regression bounds (not requirements: the aim of < 300 is not met, docs/stub.md says why).
+# Regression bounds (not requirements: an earlier aim of < 300 is not met).
 # The counts below are those of the day the bounds were set (7acaa9b, 2026-11-23), not today's;
 # today's are printed by `python -m bench stub` (instructions_per_control_step_x86_64, per mode,
 # with_telemetry / without_telemetry, key "toggle"). On that day: 351 / 427 (EKF, gcc 12 -O2
