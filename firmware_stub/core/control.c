@@ -333,10 +333,10 @@ static float clamp_abs(float v, float lim) { return v > lim ? lim : (v < -lim ? 
 /* ---- non-finite quantities: FAULT NON_FINITE (SPEC.md 9.6) ----
  * A NaN compares false with everything, so a NaN current would pass every limit and a NaN
  * estimate would drive the switching table: any NaN or infinity in what the drive measures,
- * estimates or commands stops it. Each check sums its quantities first (one test in the
- * common case: a NaN or an infinity in any term makes the sum NaN or infinite) and names the
- * first offending one, in signal-path order (a NaN current makes the flux NaN too: the
- * current is named), only when the sum is not finite. */
+ * estimates or commands stops it. The step sums the quantities first (one test in the common
+ * case: a NaN or an infinity in any term makes the sum NaN or infinite) and names the first
+ * offending one, in signal-path order (a NaN current makes the flux NaN too: the current is
+ * named), only when the sum is not finite. */
 
 #if defined(__GNUC__)
 #define CTL_COLD __attribute__((noinline, cold))
