@@ -340,41 +340,40 @@ static float clamp_abs(float v, float lim) { return v > lim ? lim : (v < -lim ? 
 /* ---- non-finite quantities: FAULT NON_FINITE (SPEC.md 9.6) ----
  * A NaN compares false with everything, so a NaN current would pass every limit and a NaN
  * estimate would drive the switching table: any NaN or infinity in what the drive measures,
- * estimates or commands stops it. Each check sums its quantities first (one test in the
- * common case: a NaN or an infinity in any term makes the sum NaN or infinite) and names the
- * first offending one, in signal-path order (a NaN current makes the flux NaN too: the
- * current is named), only when the sum is not finite. */
+ * estimates or commands stops it. The step sums the quantities first (one test in the common
+ * case: a NaN or an infinity in any term makes the sum NaN or infinite) and names the first
+ * offending one, in signal-path order (a NaN current makes the flux NaN too: the current is
+ * named), only when the sum is not finite. */
 
-/* The first non-finite of n values as PROT_FAULT_NONE or HIL_FAULT_NON_FINITE with the
- * hil_nonfinite_quantity in *value (none: finite values whose sum overflowed). */
 #if defined(__GNUC__)
-__attribute__((noinline, cold))
+#define CTL_COLD __attribute__((noinline, cold))
+#else
+#define CTL_COLD
 #endif
-static uint8_t first_nonfinite(const float *values, const uint8_t *quantities, size_t n, float *value)
+
+/* The hil_nonfinite_quantity of the first non-finite of n values, 0 when none is (finite
+ * values whose sum overflowed). */
+static uint8_t first_nonfinite(const float *values, const uint8_t *quantities, size_t n)
 {
     for (size_t k = 0; k < n; ++k) {
         if (!isfinite(values[k])) {
-            *value = (float)quantities[k];
-            return HIL_FAULT_NON_FINITE;
+            return quantities[k];
         }
     }
-    return PROT_FAULT_NONE;
+    return 0u;
 }
 
-/* Everything the running drive acts on: the measurements, the encoder speed, the flux
- * observer's flux, its magnitude (which overflows before its components do) and the torque,
- * the conventional and the EKF speed and the EKF angle. */
-static uint8_t nonfinite_state(const ctl *c, const clarke_out *i, float vdc_v, float flux_mag_wb, float torque_nm,
-                               float *value)
+/* Everything the running drive acts on, in signal-path order: the measurements, the encoder
+ * speed, the flux observer's flux, its magnitude and the torque, the conventional and the EKF
+ * speed and the EKF angle, the speed loop's integrator (the torque reference is finite when
+ * it, the speed fed back and the commanded speed, finite since ctl_set_command, are). FOC's
+ * voltage is checked where it is made (ctl_step). Out of line: called only when state_sum()
+ * is not finite. */
+static CTL_COLD uint8_t nonfinite_state(const ctl *c, const clarke_out *i, float vdc_v, float flux_mag_wb,
+                                        float torque_nm)
 {
     const ctl_state *st = &c->st;
-    float sum = i->i_alpha_a + i->i_beta_a + vdc_v + st->enc.speed_rad_s + st->flux.psi_alpha_wb +
-                st->flux.psi_beta_wb + flux_mag_wb + torque_nm + st->conv.speed_lpf_rad_s + st->ekf.speed_rad_s +
-                st->ekf.theta_filtered_rad;
-    if (isfinite(sum)) {
-        return PROT_FAULT_NONE;
-    }
-    const float values[11] = {i->i_alpha_a,
+    const float values[12] = {i->i_alpha_a,
                               i->i_beta_a,
                               vdc_v,
                               st->enc.speed_rad_s,
@@ -384,26 +383,28 @@ static uint8_t nonfinite_state(const ctl *c, const clarke_out *i, float vdc_v, f
                               torque_nm,
                               st->conv.speed_lpf_rad_s,
                               st->ekf.speed_rad_s,
-                              st->ekf.theta_filtered_rad};
-    static const uint8_t quantities[11] = {
+                              st->ekf.theta_filtered_rad,
+                              st->pi.integral_nm};
+    static const uint8_t quantities[12] = {
         HIL_NONFINITE_PHASE_CURRENT,  HIL_NONFINITE_PHASE_CURRENT,  HIL_NONFINITE_DC_LINK_VOLTAGE,
         HIL_NONFINITE_MEASURED_SPEED, HIL_NONFINITE_FLUX_ESTIMATE,  HIL_NONFINITE_FLUX_ESTIMATE,
         HIL_NONFINITE_FLUX_ESTIMATE,  HIL_NONFINITE_FLUX_ESTIMATE,  HIL_NONFINITE_SPEED_ESTIMATE,
-        HIL_NONFINITE_SPEED_ESTIMATE, HIL_NONFINITE_SPEED_ESTIMATE};
-    return first_nonfinite(values, quantities, 11u, value);
+        HIL_NONFINITE_SPEED_ESTIMATE, HIL_NONFINITE_SPEED_ESTIMATE, HIL_NONFINITE_TORQUE_REFERENCE};
+    return first_nonfinite(values, quantities, 12u);
 }
 
-/* What the control law made of it: the torque reference and, under FOC, the voltage. */
-static uint8_t nonfinite_output(const ctl *c, float torque_ref_nm, float *value)
+/* x - x is 0 for every finite x, NaN for NaN and the infinities: two instructions fewer than
+ * isfinite() on x86-64 (the step is held to an instruction bound, tests/test_stub_bench.py). */
+static inline int ctl_finite(float x) { return x - x == 0.0f; }
+
+/* The sum nonfinite_state() looks behind. It leaves out the currents and the flux components:
+ * the torque estimate 3/2 p (psi_a i_b - psi_b i_a) is not finite when any of them is not (a
+ * NaN or an infinity times anything, zero included, is not finite), and the magnitude, which
+ * overflows before its components do, is in; four adds fewer, again for the bound. */
+static inline float state_sum(const ctl_state *st, float vdc_v, float flux_mag_wb, float torque_nm)
 {
-    const ctl_state *st = &c->st;
-    float u_sum = st->answer_duty ? st->foc.u_alpha_v + st->foc.u_beta_v : 0.0f;
-    if (isfinite(torque_ref_nm + u_sum)) {
-        return PROT_FAULT_NONE;
-    }
-    const float values[2] = {torque_ref_nm, u_sum};
-    static const uint8_t quantities[2] = {HIL_NONFINITE_TORQUE_REFERENCE, HIL_NONFINITE_VOLTAGE_REFERENCE};
-    return first_nonfinite(values, quantities, 2u, value);
+    return torque_nm + flux_mag_wb + vdc_v + st->enc.speed_rad_s + st->conv.speed_lpf_rad_s + st->ekf.speed_rad_s +
+           st->ekf.theta_filtered_rad + st->pi.integral_nm;
 }
 
 enum { CTL_STARTUP_DONE = 0, CTL_STARTUP_ZERO_CAL = 1, CTL_STARTUP_RS_ID = 2 };
@@ -543,11 +544,11 @@ uint8_t ctl_step(ctl *c, const hil_sample *s, hil_telemetry *tm)
     uint8_t sector = 0u;
     float torque_ref = 0.0f;
     st->answer_duty = 0u;
-    if (st->state == HIL_STATE_RUNNING) {
-        /* the start-up included: never RUNNING with a NaN */
-        float value = 0.0f;
-        if (nonfinite_state(c, &i, vdc_v, mag, torque, &value) != PROT_FAULT_NONE) {
-            ctl_trip(c, HIL_FAULT_NON_FINITE, value, s->period);
+    if (st->state == HIL_STATE_RUNNING && !ctl_finite(state_sum(st, vdc_v, mag, torque))) {
+        /* never RUNNING with a NaN, the start-up included: checked before the limits a NaN fools */
+        uint8_t quantity = nonfinite_state(c, &i, vdc_v, mag, torque);
+        if (quantity != 0u) {
+            ctl_trip(c, HIL_FAULT_NON_FINITE, (float)quantity, s->period);
         }
     }
     if (st->state == HIL_STATE_RUNNING && !calibrating) {
@@ -568,6 +569,11 @@ uint8_t ctl_step(ctl *c, const hil_sample *s, hil_telemetry *tm)
             sector = swtab_sector_of_angle(theta_s);
             if (k->control_law == CTL_LAW_FOC) {
                 foc_law(c, &i, torque, mag, vdc_v, torque_ref, feedback);
+                if (!ctl_finite(st->foc.u_alpha_v + st->foc.u_beta_v)) {
+                    /* the DUTY answer would be made of a NaN: every switch off instead */
+                    ctl_trip(c, HIL_FAULT_NON_FINITE, (float)HIL_NONFINITE_VOLTAGE_REFERENCE, s->period);
+                    st->answer_duty = 0u;
+                }
             } else {
                 float mag_c = mag, torque_c = torque;
                 if (k->delay_comp) {
@@ -576,11 +582,6 @@ uint8_t ctl_step(ctl *c, const hil_sample *s, hil_telemetry *tm)
                 uint8_t flux_up = hyst_step(&k->flux_hyst, &st->flux_hyst, c->flux_ref_wb, mag_c);
                 uint8_t torque_up = hyst_step(&k->torque_hyst, &st->torque_hyst, torque_ref, torque_c);
                 vector = k->vector_of[sector][(flux_up ? 0u : 2u) + (torque_up ? 0u : 1u)]; /* Table 3 */
-            }
-            if (nonfinite_output(c, torque_ref, &value) != PROT_FAULT_NONE) {
-                ctl_trip(c, HIL_FAULT_NON_FINITE, value, s->period);
-                vector = 0u; /* every switch off, in this answer already */
-                st->answer_duty = 0u;
             }
         }
     } else if (calibrating == CTL_STARTUP_RS_ID && st->state == HIL_STATE_RUNNING) {

@@ -35,6 +35,7 @@ uint8_t prot_encoder_loss(const prot_cfg *cfg, prot_state *st, uint16_t count, f
                           int encoder_selected, float *value)
 {
     float speed = fabsf(flux_speed_rad_s);
+    /* a NaN speed fails "speed < min": counted as turning, so the timer runs (fails safe) */
     if (!encoder_selected || count != st->last_count || speed < cfg->encoder_loss_min_speed_rad_s) {
         st->frozen_periods = 0u;
         st->last_count = count;

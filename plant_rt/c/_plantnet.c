@@ -486,6 +486,26 @@ static double locate(net_t *n, double t, const double *y, double h, const double
     return b;
 }
 
+/* The RK4 step count of an interval, max(1, ceil(...)) as the Python reference computes it from
+ * cn = ceil(length / h_max - 1e-9): 0, or -1 with ValueError when cn is NaN, infinite or above
+ * MAX_RK4_STEPS (the conversion to long would be undefined there, and Python's int would make
+ * a loop that never ends). Identical to the cast for every count that can run. */
+#define MAX_RK4_STEPS 2147483647.0
+static int rk4_steps(double cn, long *steps)
+{
+    if (cn < 1.0) {
+        *steps = 1;
+        return 0;
+    }
+    if (!(cn <= MAX_RK4_STEPS)) {
+        PyErr_SetString(PyExc_ValueError, "plant kernel: an interval's RK4 step count (its length / h_max) is "
+                                          "NaN, infinite or above 2^31 - 1");
+        return -1;
+    }
+    *steps = (long)cn;
+    return 0;
+}
+
 /* Network._coast: 1 and out filled when no conducting path opens, else 0. */
 static int coast(net_t *n, double t0, double t1, const double *y, long steps, double *acc,
                  double *out)
@@ -539,16 +559,20 @@ static int coast(net_t *n, double t0, double t1, const double *y, long steps, do
     return 1;
 }
 
-static void net_integrate(net_t *n, double t0, double t1, double *y, double h_max, double *acc)
+/* 0, or -1 with an exception (rk4_steps). */
+static int net_integrate(net_t *n, double t0, double t1, double *y, double h_max, double *acc)
 {
     double ratio = (t1 - t0) / h_max - 1e-9;
     double cn = ceil(ratio);
-    long steps = cn < 1.0 ? 1 : (long)cn;
+    long steps;
+    if (rk4_steps(cn, &steps) < 0) {
+        return -1;
+    }
     if (n->all_zero) {
         double out[5];
         if (coast(n, t0, t1, y, steps, acc, out)) {
             memcpy(y, out, sizeof out);
-            return;
+            return 0;
         }
     }
     double h_nom = (t1 - t0) / (double)steps;
@@ -614,6 +638,7 @@ static void net_integrate(net_t *n, double t0, double t1, double *y, double h_ma
         note_knee_sides(n);
         n0 = event_values(n, g0);
     }
+    return 0;
 }
 
 /* ------------------------------------------------------------------ leg period */
@@ -777,9 +802,11 @@ static void advance_spm(const cfg_t *m, double *st, double va, double vb, double
     st[3] = th;
 }
 
-/* MotorModel.advance_pieces; st = (pa, pb, w, th) in and out, returns int g . i dt. */
-static double advance_pieces(const cfg_t *m, int spm, double *st, const piece_t *pieces,
-                             int npieces, double h_max, double tl0, double tl_slope, double bw)
+/* MotorModel.advance_pieces; st = (pa, pb, w, th) in and out, *q_out = int g . i dt. 0, or -1
+ * with an exception (rk4_steps; st is then partly advanced). */
+static int advance_pieces(const cfg_t *m, int spm, double *st, const piece_t *pieces,
+                          int npieces, double h_max, double tl0, double tl_slope, double bw,
+                          double *q_out)
 {
     double p = m->p, r = m->r, psim = m->psim, ild = m->ild, ij = m->ij, kt = m->kt;
     double pa = st[0], pb = st[1], w = st[2], th = st[3];
@@ -790,9 +817,8 @@ static double advance_pieces(const cfg_t *m, int spm, double *st, const piece_t 
     for (int k = 0; k < npieces; k++) {
         double length = pieces[k].len, va = pieces[k].va, vb = pieces[k].vb;
         long n = 1;
-        if (!(length <= h_max)) {
-            double cn = ceil(length / h_max - 1e-9);
-            n = cn < 1.0 ? 1 : (long)cn;
+        if (!(length <= h_max) && rk4_steps(ceil(length / h_max - 1e-9), &n) < 0) {
+            return -1;
         }
         double pa0 = pa, pb0 = pb;
         if (!spm) {
@@ -823,7 +849,8 @@ static double advance_pieces(const cfg_t *m, int spm, double *st, const piece_t 
     st[1] = pb;
     st[2] = w;
     st[3] = th;
-    return q / r;
+    *q_out = q / r;
+    return 0;
 }
 
 /* MotorModel.currents: i_alpha, i_beta, i_d, i_q (out[0..3]) of the flux linkage (pa, pb) at
@@ -898,6 +925,12 @@ static int get_cfg(PyObject *motor, PyObject *cfg, cfg_t *c)
     c->ij = k[5];
     c->b = k[6];
     c->kt = k[7];
+    /* the ranges below before the conversions to int (undefined for NaN or out of int's range);
+     * accepted are the values whose truncation is in range, as before */
+    if (!(f[0] > -1.0 && f[0] < 3.0) || !(f[12] > -2.0 && f[12] < 3.0)) {
+        PyErr_SetString(PyExc_ValueError, "cfg: dc_mode or open_phase out of range");
+        return -1;
+    }
     c->dc_mode = (int)f[0];
     c->src_v = f[1];
     c->rs = f[2];
@@ -971,7 +1004,9 @@ static PyObject *mod_integrate(PyObject *self, PyObject *const *args, Py_ssize_t
         return NULL;
     }
     configure(&n, kinds);
-    net_integrate(&n, t0, t1, y, h_max, acc);
+    if (net_integrate(&n, t0, t1, y, h_max, acc) < 0) {
+        return NULL;
+    }
     for (int i = 0; i < 3; i++) {
         PyObject *f = PyFloat_FromDouble(acc[i]);
         if (f == NULL) {
@@ -1102,8 +1137,8 @@ static int period_interval(const period_args_t *pa, Py_ssize_t i, double *a, dou
 }
 
 /* Network.set_load_segment, begin and integrate over [t0 + a, t0 + b]: one interval through the
- * network, the load v0 + slope (t - (t0 + a)) over it. */
-static void network_interval(period_args_t *pa, double a, double b, double v0, const int legs[3])
+ * network, the load v0 + slope (t - (t0 + a)) over it. 0, or -1 with an exception. */
+static int network_interval(period_args_t *pa, double a, double b, double v0, const int legs[3])
 {
     net_t *n = &pa->n;
     double ta = pa->t0 + a;
@@ -1111,7 +1146,7 @@ static void network_interval(period_args_t *pa, double a, double b, double v0, c
     n->c.tl_v0 = v0;
     n->c.tl_slope = pa->slope;
     begin(n, ta, pa->y, legs, &pa->last);
-    net_integrate(n, ta, pa->t0 + b, pa->y, pa->h_max, pa->acc);
+    return net_integrate(n, ta, pa->t0 + b, pa->y, pa->h_max, pa->acc);
 }
 
 /* Writes acc back into the caller's list; 0, or -1 with an exception. */
@@ -1179,12 +1214,15 @@ static int driven_vector(PyObject *vectors, long word, double v[4], int legs[3])
     return get_kinds(PyTuple_GET_ITEM(vec, 4), legs) < 0 ? -1 : 1;
 }
 
-/* Plant._advance: the fast RK4 over one driven interval of `length`, y and acc updated. */
-static void fast_advance(const cfg_t *m, int spm, double *y, const double v[4], double length,
-                         double h_max, double v0, double slope, double bw, double *acc)
+/* Plant._advance: the fast RK4 over one driven interval of `length`, y and acc updated. 0, or -1
+ * with an exception (rk4_steps). */
+static int fast_advance(const cfg_t *m, int spm, double *y, const double v[4], double length,
+                        double h_max, double v0, double slope, double bw, double *acc)
 {
-    double steps = ceil(length / h_max - 1e-9);
-    long n = steps < 1.0 ? 1 : (long)steps;
+    long n;
+    if (rk4_steps(ceil(length / h_max - 1e-9), &n) < 0) {
+        return -1;
+    }
     double pa0 = y[0], pb0 = y[1];
     double st[4] = {y[0], y[1], y[2], y[3]};
     if (spm) {
@@ -1199,6 +1237,7 @@ static void fast_advance(const cfg_t *m, int spm, double *y, const double v[4], 
     acc[0] += v[0] * length;
     acc[1] += v[1] * length;
     acc[2] += (v[2] * (v[0] * length - (y[0] - pa0)) + v[3] * (v[1] * length - (y[1] - pb0))) / m->r;
+    return 0;
 }
 
 /* A switch toggling at `when` (word bit `bit`): the sweep's events, in (when, bit) order. */
@@ -1381,7 +1420,9 @@ static int run_intervals(period_args_t *pa, const struct fast_path *f, int *net_
                 return -1;
             }
             if (got) {
-                fast_advance(&n->c, f->spm, y, v, length, pa->h_max, v0, pa->slope, f->bw, pa->acc);
+                if (fast_advance(&n->c, f->spm, y, v, length, pa->h_max, v0, pa->slope, f->bw, pa->acc) < 0) {
+                    return -1;
+                }
                 took_driven(pa, driven, net_dirty);
                 continue;
             }
@@ -1415,7 +1456,9 @@ static int run_intervals(period_args_t *pa, const struct fast_path *f, int *net_
                 }
                 double trial[5] = {y[0], y[1], y[2], y[3], y[4]};
                 double part[3] = {0.0, 0.0, 0.0};
-                fast_advance(&n->c, f->spm, trial, v, length, pa->h_max, v0, pa->slope, f->bw, part);
+                if (fast_advance(&n->c, f->spm, trial, v, length, pa->h_max, v0, pa->slope, f->bw, part) < 0) {
+                    return -1;
+                }
                 currents(&n->c, trial[0], trial[1], trial[3], &ia, &ib);
                 double after[3] = {ia, -0.5 * ia + S32 * ib, -0.5 * ia - S32 * ib};
                 for (int x = 0; x < 3; x++) {
@@ -1433,7 +1476,9 @@ static int run_intervals(period_args_t *pa, const struct fast_path *f, int *net_
                 }
             }
         }
-        network_interval(pa, a, b, v0, legs);
+        if (network_interval(pa, a, b, v0, legs) < 0) {
+            return -1;
+        }
         *net_dirty = 1;
         (*ran)++;
     }
@@ -1503,7 +1548,8 @@ static PyObject *mod_settle(PyObject *self, PyObject *const *args, Py_ssize_t na
 
 /* Plant._leg_period's numerics from the windows on. Returns 0 (the period is not one the
  * constant-vector form may take: the caller uses the general network), 1 (done: st, out),
- * -1 (more edges than this code holds: the caller uses the Python version). */
+ * -1 (more edges than this code holds: the caller uses the Python version), -2 with an
+ * exception (rk4_steps; st unchanged). */
 static int leg_period(const cfg_t *m, double lind, int spm, double T, double wins[6][MAX_WIN][2],
                       const int nwin[6], double ud, double knee, double vdc, double *st,
                       double h_max, double v0, double slope, double bw, double *out, int *h_end)
@@ -1647,7 +1693,11 @@ static int leg_period(const cfg_t *m, double lind, int spm, double T, double win
         }
     }
     double y0[4] = {st[0], st[1], st[2], st[3]};
-    double q = advance_pieces(m, spm, st, pieces, np, h_max, v0, slope, bw);
+    double q;
+    if (advance_pieces(m, spm, st, pieces, np, h_max, v0, slope, bw, &q) < 0) {
+        memcpy(st, y0, sizeof y0);
+        return -2;
+    }
     if (nneed) {
         /* Plant._signs_hold */
         double ia, ib;
@@ -1769,6 +1819,9 @@ static PyObject *mod_leg_period(PyObject *self, PyObject *const *args, Py_ssize_
     int h_end = 0;
     int r = leg_period(&m, ld, spm, T, wins, nwin, ud, knee, vdc, st, h_max, v0, slope, bw, out,
                        &h_end);
+    if (r == -2) {
+        return NULL;
+    }
     if (r < 0) {
         Py_RETURN_NONE;
     }
@@ -2772,6 +2825,10 @@ static PyObject *mod_duty_period(PyObject *self, PyObject *const *args, Py_ssize
     double ld = c[8], T = c[10], delay_s = c[11], td = c[12], ud = c[13], knee = c[14];
     double h_max = c[15];
     int spm = c[9] != 0.0;
+    if (!(c[16] >= 0.0 && c[16] <= 2147483647.0)) {
+        PyErr_SetString(PyExc_ValueError, "duty_period: cfg's pulse bit must be 0 .. 2^31 - 1");
+        return NULL;
+    }
     long pulse_bit = (long)c[16];
     /* Plant.step: t0 = period * T (the int converted exactly: period < 2^52) */
     double t0 = (double)period * T;
@@ -2805,6 +2862,10 @@ static PyObject *mod_duty_period(PyObject *self, PyObject *const *args, Py_ssize
     int h_end = 0;
     int done = leg_period(&m, ld, spm, T, wins, nwin, ud, knee, vdc, st, h_max, v0, slope, bw,
                           out, &h_end);
+    if (done == -2) {
+        Py_DECREF(tup);
+        return NULL;
+    }
     if (done < 0) {
         Py_DECREF(tup);
         Py_RETURN_NONE;     /* the rise memory is untouched: Python does it all again */

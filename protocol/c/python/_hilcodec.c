@@ -1247,7 +1247,8 @@ static int fd_wait(int fd, short events, double timeout_s)
 {
     struct pollfd pfd = {fd, events, 0};
     double ms = ceil(timeout_s * 1e3);
-    int timeout_ms = ms <= 0.0 ? 0 : (ms > 1e9 ? 1000000000 : (int)ms);
+    /* written so that a NaN timeout polls once rather than converting NaN to int (undefined) */
+    int timeout_ms = !(ms > 0.0) ? 0 : (ms > 1e9 ? 1000000000 : (int)ms);
     int r;
     Py_BEGIN_ALLOW_THREADS
     r = poll(&pfd, 1, timeout_ms);
