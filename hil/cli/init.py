@@ -252,11 +252,8 @@ name: my firmware
 def _plans(n: Nameplate, d: Derived) -> dict[str, str]:
     half = 0.5 * n.rated_speed_rpm
     rated = n.rated_speed_rpm
-    ramp_ms = d.ramp_s * 1e3
-    # 10-90 % of the step at the torque limit takes 0.8 of the ramp; a speed loop that leaves
-    # the limit early may take up to twice that
-    rise_lo, rise_hi = 0.8 * ramp_ms * 0.9, 0.8 * ramp_ms * 2.0
-    settle_ms = 5.0 * ramp_ms + 100.0
+    # the speed step's limits are formulas in its plan (the profile's values, evaluated before
+    # each run); the other plans' waits use the nameplate's ramp
     wait_s = max(0.5, 4.0 * d.ramp_s + 0.3)
     # Each plan runs on the project's profile and, unless --board says otherwise, on the stub
     # tuned for the motor: `hil run plans/ --link stub` passes out of the box.
@@ -265,56 +262,68 @@ def _plans(n: Nameplate, d: Derived) -> dict[str, str]:
     return {
         "01_speed_step.yaml": f"""name: {n.name}-speed-step
 description: |
-  Half to rated speed ({half:g} -> {rated:g} rpm) with encoder feedback.
-  Derived by `hil init` from the nameplate:
+  Half to rated speed with encoder feedback. Every limit is a formula of the bench profile
+  (profile.yaml: motor.*), the drive's current limit and the constants below, evaluated
+  before each run (hil-bench test_plans/README.md, "Formulas"): change the profile and the
+  limits follow. On this nameplate (`hil init`):
 {derivation}
   Limits:
-  - rise time 10-90 %: at the torque limit 0.8 of the ramp = {0.8 * ramp_ms:.4g} ms; from 0.9 of
-    that (the limit reached at once) to twice it (a loop that leaves the limit early):
-    {rise_lo:.4g} .. {rise_hi:.4g} ms.
+  - rise time 10-90 %: at the torque limit 0.8 of the ramp J dw / T_lim; from 0.9 of that
+    (the limit reached at once) to twice it (a loop that leaves the limit early).
   - overshoot <= 20 %: a requirement (a speed loop designed for about 50 deg phase margin
     overshoots 15-20 % on a torque-limited step), not physics; tighten it to your design.
-  - settling to 2 % within five ramps plus 100 ms = {settle_ms:.4g} ms.
+  - settling to 2 % within five ramps plus 100 ms.
   - final speed within 1 % of the reference.
-{common}steps:
-  - command: {{enable: true, speed_source: encoder, speed_ref_rpm: {half:g}}}
-  - wait_until: {{signal: plant.speed_rpm, comparison: within, value: {half:g}, tolerance: {0.01 * half:g},
-                 unit: rpm, hold_s: 0.02, timeout_s: {wait_s:.3g}}}
+{common}constants:
+  second: {{value: 1, unit: s}}
+  speed_start: {{value: "0.5 * motor.rated_speed_rpm", unit: rpm}}
+  speed_target: {{value: "motor.rated_speed_rpm", unit: rpm}}
+  # the drive's peak phase current (the nameplate's): the torque limit 3/2 p psi_f I follows
+  current_limit: {{value: {_num(d.current_limit_a)}, unit: A}}
+  torque_limit: {{value: "1.5 * motor.pole_pairs * motor.flux_linkage_wb * current_limit", unit: Nm}}
+  # the torque-limited ramp from half to rated speed, J dw / T_lim
+  ramp_time: {{value: "motor.inertia_kgm2 * (speed_target - speed_start) / torque_limit", unit: ms}}
+  settling_limit: {{value: "5 * ramp_time + 0.1 * second", unit: ms}}
+steps:
+  - command: {{enable: true, speed_source: encoder, speed_ref_rpm: speed_start}}
+  - wait_until: {{signal: plant.speed_rpm, comparison: within, value: speed_start,
+                 tolerance: "0.01 * speed_start", unit: rpm, hold_s: 0.02,
+                 timeout_s: "max(0.5 * second, 4 * ramp_time + 0.3 * second)"}}
   - mark: step
-  - command: {{speed_ref_rpm: {rated:g}}}
-  - run: {{duration_s: {settle_ms / 1e3 + 0.1:.3g}}}
+  - command: {{speed_ref_rpm: speed_target}}
+  - run: {{duration_s: "settling_limit + 0.1 * second"}}
   - check:
       name: rise time 10-90 %
       kind: rise_time
       signal: plant.speed_rpm
       window: {{from: step}}
-      initial: {{value: {half:g}, unit: rpm}}
-      target: {{value: {rated:g}, unit: rpm}}
-      limits: {{low: {rise_lo:.4g}, high: {rise_hi:.4g}, unit: ms}}
+      initial: {{value: speed_start, unit: rpm}}
+      target: {{value: speed_target, unit: rpm}}
+      limits: {{low: "0.9 * 0.8 * ramp_time", high: "2.0 * 0.8 * ramp_time", unit: ms}}
   - check:
       name: overshoot
       kind: overshoot
       signal: plant.speed_rpm
       window: {{from: step}}
-      initial: {{value: {half:g}, unit: rpm}}
-      target: {{value: {rated:g}, unit: rpm}}
+      initial: {{value: speed_start, unit: rpm}}
+      target: {{value: speed_target, unit: rpm}}
       limits: {{high: 20, unit: "%"}}
   - check:
       name: settling within 2 %
       kind: settling_time
       signal: plant.speed_rpm
       window: {{from: step}}
-      initial: {{value: {half:g}, unit: rpm}}
-      target: {{value: {rated:g}, unit: rpm}}
+      initial: {{value: speed_start, unit: rpm}}
+      target: {{value: speed_target, unit: rpm}}
       band_pct: 2
-      limits: {{high: {settle_ms:.4g}, unit: ms}}
+      limits: {{high: settling_limit, unit: ms}}
   - check:
       name: final speed
       kind: final_value
       signal: plant.speed_rpm
       average_s: 0.05
       window: {{from: step}}
-      limits: {{low: {0.99 * rated:g}, high: {1.01 * rated:g}, unit: rpm}}
+      limits: {{low: "0.99 * speed_target", high: "1.01 * speed_target", unit: rpm}}
 """,
         "02_steady_state.yaml": f"""name: {n.name}-steady-state
 description: |
