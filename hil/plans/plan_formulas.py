@@ -175,7 +175,7 @@ def substitute(doc: YamlDocument, values: Mapping[str, tuple[float, str]]
         value = raw["value"]
         if isinstance(value, str):
             try:
-                d = evaluate(value, env, unit_)
+                d = _with_constants_inputs(evaluate(value, env, unit_), constants)
             except FormulaError as exc:
                 raise doc.error(cpath + ("value",), str(exc)) from None
         elif isinstance(value, (int, float)) and not isinstance(value, bool):
@@ -195,7 +195,7 @@ def substitute(doc: YamlDocument, values: Mapping[str, tuple[float, str]]
         except (UnitError, KeyError) as exc:
             raise doc.error(path, f"the formula's unit: {exc}") from None
         try:
-            d = evaluate(text, env, unit_)
+            d = _with_constants_inputs(evaluate(text, env, unit_), constants)
         except FormulaError as exc:
             raise doc.error(path, str(exc)) from None
         derivations[path] = d
@@ -203,6 +203,17 @@ def substitute(doc: YamlDocument, values: Mapping[str, tuple[float, str]]
 
     _walk(data, (), visit)
     return data, derivations, constants
+
+
+def _with_constants_inputs(d: Derivation, constants: Mapping[str, Derivation]) -> Derivation:
+    """d with the inputs of the constants it reads after each of them (a constant's own inputs
+    already include those of the constants it reads): every value a limit depends on."""
+    inputs = []
+    for i in d.inputs:
+        inputs.append(i)
+        inputs.extend(constants[i.name].inputs if i.name in constants else ())
+    unique = tuple(dict((i.name, i) for i in inputs).values())
+    return dataclasses.replace(d, inputs=unique)
 
 
 def plan_contexts(doc: YamlDocument, path) -> list[tuple[str, Any, Any]]:
