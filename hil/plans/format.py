@@ -627,7 +627,7 @@ def _build(doc: YamlDocument, path: Path, context=None) -> Plan:
     constants: dict = {}
     formula_profile = None
     if plan_formulas.has_formulas(data):
-        contexts = [context] if context is not None else plan_formulas.plan_contexts(doc, path)
+        contexts = [context] if context is not None else plan_formulas.plan_contexts(doc, path, resolve_profile)
         for i, (label, profile, board) in enumerate(contexts):
             values = plan_formulas.named_values(profile, board, label)
             bound = plan_formulas.substitute(doc, values)

@@ -130,6 +130,15 @@ def _site_unit(parent: dict, key: Any) -> str | None:
     return suffix_unit(key)
 
 
+def _plain_number(text: str) -> bool:
+    """'8e-4': a number YAML read as text (no decimal point); the schema's error says so."""
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
 def _walk(data: dict, path: KeyPath, visit) -> None:
     """Calls visit(path, parent, key, value) for every string at a formula site; its return
     value replaces the string."""
@@ -139,7 +148,8 @@ def _walk(data: dict, path: KeyPath, visit) -> None:
                 value = node[key]
                 if not where and key in _NOT_FORMULAS:
                     continue
-                if isinstance(value, str) and _site_unit(node, key) is not None:
+                if (isinstance(value, str) and _site_unit(node, key) is not None
+                        and not _plain_number(value)):
                     node[key] = visit(where + (key,), node, key, value)
                 else:
                     rec(value, where + (key,))
@@ -197,7 +207,9 @@ def substitute(doc: YamlDocument, values: Mapping[str, tuple[float, str]]
         try:
             d = _with_constants_inputs(evaluate(text, env, unit_), constants)
         except FormulaError as exc:
-            raise doc.error(path, str(exc)) from None
+            prefix = (f"expected a number, got a string ('{text}'), read as a formula: "
+                      if text.strip().isidentifier() else "")
+            raise doc.error(path, prefix + str(exc)) from None
         derivations[path] = d
         return d.value
 
@@ -216,13 +228,13 @@ def _with_constants_inputs(d: Derivation, constants: Mapping[str, Derivation]) -
     return dataclasses.replace(d, inputs=unique)
 
 
-def plan_contexts(doc: YamlDocument, path) -> list[tuple[str, Any, Any]]:
+def plan_contexts(doc: YamlDocument, path, resolve_profile) -> list[tuple[str, Any, Any]]:
     """(label, profile, board) for every profile a plan's data lists, with its overrides and the
-    board it names (else its link's): what the plan is evaluated against when it is loaded."""
+    board it names (else its link's): what the plan is evaluated against when it is loaded.
+    resolve_profile(value, base_dir) -> a ref with .label and .path (hil.plans.format's)."""
     from pathlib import Path
 
     from hil.boards import load_board
-    from hil.plans.format import ProfileRef, resolve_profile
     from hil.session.board_params import default_board, load_bench_profile
 
     data = doc.data
@@ -232,14 +244,15 @@ def plan_contexts(doc: YamlDocument, path) -> list[tuple[str, Any, Any]]:
         names = [(("profiles", i), v) for i, v in enumerate(data["profiles"])]
     elif isinstance(data.get("profile"), str):
         names = [(("profile",), data["profile"])]
-    refs: list[ProfileRef] = []
+    refs: list[tuple[str, Any]] = []
     for key, value in names:
         try:
-            refs.append(resolve_profile(str(value), base))
+            ref = resolve_profile(str(value), base)
         except ValueError as exc:
             raise doc.error(key, str(exc)) from None
+        refs.append((ref.label, ref.path))
     if not refs:
-        refs = [ProfileRef("paper", None)]
+        refs = [("paper", None)]
     overrides = data.get("overrides") if isinstance(data.get("overrides"), dict) else None
     if isinstance(data.get("board"), str):
         board_path = (base / data["board"]).resolve()
@@ -248,8 +261,8 @@ def plan_contexts(doc: YamlDocument, path) -> list[tuple[str, Any, Any]]:
         board = load_board(board_path)
     else:
         board = default_board(data.get("link") if isinstance(data.get("link"), str) else None)
-    return [(ref.label, load_bench_profile(ref.path, overrides=overrides or None), board)
-            for ref in refs]
+    return [(label, load_bench_profile(profile_path, overrides=overrides or None), board)
+            for label, profile_path in refs]
 
 
 __all__ = ["profile_values", "board_values", "named_values", "has_formulas", "substitute",
