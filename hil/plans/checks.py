@@ -758,6 +758,8 @@ def evaluate_check(spec: "CheckStep", signals: SignalSet, marks: Mapping[str, fl
     where = f"{spec.source}:{spec.line}: check '{spec.name}'"
     check_role = getattr(spec, "role", "acceptance")
     note = getattr(spec, "note", "")
+    if hasattr(spec, "role_for"):
+        check_role, note = spec.role_for(profile)
     spec_limits = spec.limits_for(profile) if hasattr(spec, "limits_for") else spec.limits
     formulas = ({k: d.to_json() for k, d in spec.derivations_for(profile).items()}
                 if hasattr(spec, "derivations_for") else {})

@@ -355,6 +355,9 @@ class CheckStep(StepBase):
     derivations: Mapping[str, Derivation] = field(default_factory=lambda: MappingProxyType({}))
     profile_derivations: Mapping[str, Mapping[str, Derivation]] = field(
         default_factory=lambda: MappingProxyType({}))
+    # (role, note) of a profile whose `profile_limits` entry gives its own
+    profile_roles: Mapping[str, tuple[str, str]] = field(
+        default_factory=lambda: MappingProxyType({}))
 
     @property
     def signals(self) -> tuple[str, ...]:
@@ -365,6 +368,12 @@ class CheckStep(StepBase):
         if profile is not None and profile in self.profile_limits:
             return self.profile_limits[profile]
         return self.limits
+
+    def role_for(self, profile: str | None) -> tuple[str, str]:
+        """(role, note) on a profile: its `profile_limits` entry's when it gives one."""
+        if profile is not None and profile in self.profile_roles:
+            return self.profile_roles[profile]
+        return self.role, self.note
 
     def derivations_for(self, profile: str | None) -> Mapping[str, Derivation]:
         """The formulas behind limits_for(profile): bound name -> Derivation."""
@@ -500,10 +509,13 @@ LOAD_SCHEMAS: dict[str, dict] = {
                                ["type", "nm_per_rad_s"]),
 }
 
+# A profile's own limits may carry their own role (e.g. regression on one profile only).
+_PROFILE_LIMITS = obj({**_LIMITS["properties"], "role": {"enum": list(CHECK_ROLES)},
+                       "note": {"type": "string"}}, ["unit"])
 _CHECK_COMMON = {"name": NAME, "kind": {}, "window": _WINDOW, "limits": _LIMITS, "plot": BOOLEAN,
                  "role": {"enum": list(CHECK_ROLES)}, "note": {"type": "string"},
                  "profile_limits": {"type": "object", "minProperties": 1,
-                                    "additionalProperties": _LIMITS}}
+                                    "additionalProperties": _PROFILE_LIMITS}}
 _ARG_SCHEMAS = {"number": NUMBER, "positive": POSITIVE, "nonneg": NON_NEGATIVE, "integer": POSITIVE_INT,
                 "bool": BOOLEAN, "quantity": _QUANTITY, "check": NAME}
 
@@ -854,12 +866,20 @@ class _BuildState:
         if "limits" in body:
             limits = self.limits(body["limits"], path + ("limits",), measured_unit, kind)
         per_profile: dict[str, Limits] = {}
+        profile_roles: dict[str, tuple[str, str]] = {}
         for label, raw in body.get("profile_limits", {}).items():
             lpath = path + ("profile_limits", label)
             if label not in self.profiles:
                 raise self.err(lpath, f"profile '{label}' is not one this plan runs on "
                                       f"({', '.join(self.profiles)})")
             per_profile[label] = self.limits(raw, lpath, measured_unit, kind)
+            if "role" in raw or "note" in raw:
+                own_role = raw.get("role", role)
+                own_note = str(raw.get("note", "")).strip()
+                if own_role == "regression" and not own_note:
+                    raise self.err(lpath + ("role",), "a regression bound needs a 'note': the "
+                                                      "measurement it came from")
+                profile_roles[label] = (own_role, own_note)
         if per_profile and limits is None:
             raise self.err(path + ("profile_limits",), "profile_limits refine 'limits': give "
                                                        "'limits' for the other profiles too")
@@ -877,7 +897,8 @@ class _BuildState:
                          window=window, limits=limits, source=self.source,
                          plot=bool(body.get("plot", True)), role=role, note=note,
                          profile_limits=MappingProxyType(per_profile), derivations=derived,
-                         profile_derivations=MappingProxyType(per_profile_derived))
+                         profile_derivations=MappingProxyType(per_profile_derived),
+                         profile_roles=MappingProxyType(profile_roles))
 
     def kind_rules(self, kind: CheckKind, body: dict, args: dict, path: KeyPath) -> None:
         if kind.name == "settling_time" and "band" in body and "band_pct" in body:
