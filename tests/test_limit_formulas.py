@@ -179,3 +179,165 @@ def test_a_sweep_run_sees_its_sampled_profile_in_its_limits(tmp_path):
         return next(c for c in r["checks"] if c["name"].startswith("rise time"))["limits"]
     assert rise(heavy)["high"] == pytest.approx(2 * rise(paper)["high"])
     assert rise(heavy)["low"] == pytest.approx(2 * rise(paper)["low"])
+
+
+# ------------------------------------------------------------------ every acceptance limit
+# Acceptance limits of test_plans/ still written as numbers (plan file, check, profile of a
+# `profile_limits` entry or None for `limits`): their derivations are in each plan's
+# description but not yet formulas. This list may only shrink: a limit converted to a formula
+# (or relabelled role: regression with a note) must leave it, and no new literal acceptance
+# limit may join it. Limits that state an identity (low == high in "1": a state or fault
+# code, a switch pattern) are definitions, not tolerances, and are not listed.
+LITERAL_ACCEPTANCE_LIMITS = {
+    ("01_speed_step_sensored.yaml", "overshoot", None),
+    ("01_speed_step_sensored.yaml", "torque at the limit while accelerating", 'paper-hardware'),
+    ("02_steady_state_3000rpm.yaml", "flux magnitude at its reference", None),
+    ("02_steady_state_3000rpm.yaml", "flux magnitude at its reference", 'paper-hardware'),
+    ("02_steady_state_3000rpm.yaml", "torque ripple RMS", None),
+    ("02_steady_state_3000rpm.yaml", "mean torque equals load plus damping", None),
+    ("02_steady_state_3000rpm.yaml", "phase current RMS", None),
+    ("02_steady_state_3000rpm.yaml", "phase current THD", None),
+    ("02_steady_state_3000rpm.yaml", "speed held", None),
+    ("03_speed_estimation.yaml", "raw estimate noise (sqrt2 sigma_v / T)", None),
+    ("03_speed_estimation.yaml", "filtered estimate noise", None),
+    ("03_speed_estimation.yaml", "EKF estimate noise", None),
+    ("03_speed_estimation.yaml", "encoder speed lag on the ramp", None),
+    ("03_speed_estimation.yaml", "encoder speed lag (cross-correlation)", None),
+    ("04_sensorless_ekf.yaml", "settling within 2 % on the step up", None),
+    ("04_sensorless_ekf.yaml", "speed at 3000 rpm", None),
+    ("04_sensorless_ekf.yaml", "speed back at 1500 rpm", None),
+    ("05_rotor_position.yaml", "rotor position error, arctan angle (RMS)", None),
+    ("05_rotor_position.yaml", "rotor position error, EKF angle (RMS)", None),
+    ("05_rotor_position.yaml", "rotor position error, arctan angle (peak)", None),
+    ("05_rotor_position.yaml", "rotor position error, EKF angle (peak)", None),
+    ("06_load_step_dc_sag.yaml", "speed dip after the load step", None),
+    ("06_load_step_dc_sag.yaml", "recovery within 0.5 %", None),
+    ("06_load_step_dc_sag.yaml", "torque carries the load", None),
+    ("06_load_step_dc_sag.yaml", "DC link sagged to 80 %", None),
+    ("06_load_step_dc_sag.yaml", "speed held through the sag", None),
+    ("06_load_step_dc_sag.yaml", "flux held through the sag", None),
+    ("06_load_step_dc_sag.yaml", "flux held through the sag", 'paper-hardware'),
+    ("faults/01_sensorless_frame_drop_burst.yaml", "EKF speed RMS error before the burst", None),
+    ("faults/01_sensorless_frame_drop_burst.yaml", "no board fault", None),
+    ("faults/01_sensorless_frame_drop_burst.yaml", "speed through the burst and recovery", None),
+    ("faults/01_sensorless_frame_drop_burst.yaml", "back within 1 % after the burst", None),
+    ("faults/01_sensorless_frame_drop_burst.yaml", "EKF speed RMS error after recovery", None),
+    ("faults/02_encoder_loss_detected.yaml", "detection time", None),
+    ("faults/02_encoder_loss_detected.yaml", "speed while undetected", None),
+    ("faults/02_encoder_loss_detected.yaml", "phase a current gone", None),
+    ("faults/02_encoder_loss_detected.yaml", "phase b current gone", None),
+    ("faults/03_resistance_drift.yaml", "torque estimate error, cold", None),
+    ("faults/03_resistance_drift.yaml", "torque estimate error, hot", None),
+    ("faults/03_resistance_drift.yaml", "true stator flux, hot", None),
+    ("faults/03_resistance_drift.yaml", "board's flux estimate held at its reference", None),
+    ("faults/03_resistance_drift.yaml", "EKF speed RMS error, cold", None),
+    ("faults/03_resistance_drift.yaml", "EKF speed RMS error, hot", None),
+    ("faults/03_resistance_drift.yaml", "EKF speed RMS error, hot over cold", None),
+    ("faults/03_resistance_drift.yaml", "EKF speed bias, hot", None),
+    ("faults/03_resistance_drift.yaml", "speed dip during the drift", None),
+    ("faults/03_resistance_drift.yaml", "speed held on the encoder, hot", None),
+    ("faults/03_resistance_drift.yaml", "motor torque carries the load, hot", None),
+    ("faults/04_dc_link_sag_full_speed.yaml", "bus at 70 %", None),
+    ("faults/04_dc_link_sag_full_speed.yaml", "flux held during the sag", None),
+    ("faults/04_dc_link_sag_full_speed.yaml", "speed during the sag", None),
+    ("faults/04_dc_link_sag_full_speed.yaml", "speed held at the voltage limit", None),
+    ("faults/04_dc_link_sag_full_speed.yaml", "speed PI saturated by the voltage limit", None),
+    ("faults/04_dc_link_sag_full_speed.yaml", "peak speed after the bus returns", None),
+    ("faults/04_dc_link_sag_full_speed.yaml", "back within 1 % after the bus returns", None),
+    ("faults/04_dc_link_sag_full_speed.yaml", "no board fault", None),
+    ("foc/01_speed_step.yaml", "overshoot", None),
+    ("foc/02_steady_state.yaml", "phase current RMS", None),
+    ("foc/02_steady_state.yaml", "phase current THD", None),
+    ("foc/02_steady_state.yaml", "mean torque equals load plus damping", None),
+    ("foc/02_steady_state.yaml", "torque (i_q) ripple peak-to-peak", None),
+    ("foc/02_steady_state.yaml", "torque (i_q) ripple RMS", None),
+    ("foc/02_steady_state.yaml", "flux magnitude (i_d) ripple peak-to-peak", None),
+    ("foc/02_steady_state.yaml", "flux magnitude at i_d = 0", None),
+    ("foc/02_steady_state.yaml", "speed held", None),
+    ("foc/03_load_step.yaml", "speed dip", None),
+    ("foc/03_load_step.yaml", "recovery within 1 %", None),
+    ("foc/03_load_step.yaml", "torque carries the load", None),
+    ("foc/03_load_step.yaml", "speed back at the reference", None),
+    ("foc/04_sensorless_ekf.yaml", "settling within 2 % on the step up", None),
+    ("foc/04_sensorless_ekf.yaml", "rotor angle error RMS at 3000 rpm", None),
+    ("foc/04_sensorless_ekf.yaml", "rotor angle error peak at 3000 rpm", None),
+    ("foc/04_sensorless_ekf.yaml", "rotor angle error RMS back at 1500 rpm", None),
+    ("foc/04_sensorless_ekf.yaml", "speed at 3000 rpm", None),
+    ("foc/04_sensorless_ekf.yaml", "speed back at 1500 rpm", None),
+    ("foc/05_encoder_loss.yaml", "detection time", None),
+    ("foc/05_encoder_loss.yaml", "speed while undetected", None),
+    ("foc/05_encoder_loss.yaml", "phase a current gone", None),
+    ("foc/05_encoder_loss.yaml", "phase b current gone", None),
+    ("targets/qemu_speed_step.yaml", "final speed", None),
+    ("targets/qemu_speed_step.yaml", "overshoot", None),
+    ("targets/qemu_speed_step.yaml", "torque within the limit", None),
+}
+
+
+def literal_acceptance_limits(paths) -> set[tuple[str, str, str | None]]:
+    """(plan file, check, profile) of every acceptance bound (low/high) that is a number."""
+    from hil.run.runner import expand_plan_paths
+
+    found = set()
+    for path in expand_plan_paths(paths):
+        plan = load_plan(path)
+        rel = str(Path(path).resolve().relative_to(PLANS))
+        for check in plan.checks:
+            entries = [(None, check.limits, check.role, check.derivations)]
+            for label, limits in check.profile_limits.items():
+                entries.append((label, limits, check.role_for(label)[0],
+                                check.profile_derivations.get(label, {})))
+            for label, limits, role, derived in entries:
+                if role != "acceptance" or limits is None:
+                    continue
+                if limits.low is not None and limits.low == limits.high and limits.unit == "1":
+                    continue
+                bounds = [b for b in ("low", "high") if getattr(limits, b) is not None]
+                if any(b not in derived for b in bounds):
+                    found.add((rel, check.name, label))
+    return found
+
+
+def test_every_acceptance_limit_is_a_formula_or_a_known_literal():
+    """Every acceptance check of test_plans/ has formulas for its bounds, or is a regression
+    bound (whose note says what was measured), or is on the shrinking list above."""
+    found = literal_acceptance_limits([PLANS])
+    new = found - LITERAL_ACCEPTANCE_LIMITS
+    assert not new, f"acceptance limits written as numbers, not formulas: {sorted(new)}"
+    converted = LITERAL_ACCEPTANCE_LIMITS - found
+    assert not converted, f"no longer literal: remove from LITERAL_ACCEPTANCE_LIMITS: {sorted(converted)}"
+
+
+def test_regression_bounds_say_what_was_measured():
+    """A regression bound (a check's role or a profile's) has a note that names a measurement."""
+    from hil.run.runner import expand_plan_paths
+
+    for path in expand_plan_paths([PLANS]):
+        for check in load_plan(path).checks:
+            for label in [None, *check.profile_limits]:
+                role, note = check.role_for(label)
+                if role == "regression":
+                    assert "measured" in note.lower(), (path, check.name, label, note)
+
+
+def test_the_walker_finds_a_literal_acceptance_limit(tmp_path):
+    """The walk above can fail: plan 01 with its rise time's formulas replaced by numbers is
+    reported, and the same check relabelled regression with a note is not."""
+    text = PLAN01.read_text()
+    start = text.index('limits: {low: "0.8 * motor.inertia_kgm2')
+    end = text.index("unit: ms}", start) + len("unit: ms}")
+    literal = text[:start] + "limits: {low: 48, high: 70, marginal: 3, unit: ms}" + text[end:]
+    plans = tmp_path / "test_plans"
+    plans.mkdir()
+    (plans / "01.yaml").write_text(literal)
+    global PLANS
+    saved, PLANS = PLANS, plans
+    try:
+        assert ("01.yaml", "rise time 10-90 % (torque-limited)", None) in literal_acceptance_limits([plans])
+        relabelled = literal.replace("      name: rise time 10-90 % (torque-limited)\n",
+                                     "      name: rise time 10-90 % (torque-limited)\n"
+                                     "      role: regression\n      note: measured 50.3 ms\n")
+        (plans / "01.yaml").write_text(relabelled)
+        assert ("01.yaml", "rise time 10-90 % (torque-limited)", None) not in literal_acceptance_limits([plans])
+    finally:
+        PLANS = saved
