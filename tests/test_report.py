@@ -198,7 +198,7 @@ def test_paper_load_step_limits_hold_on_the_loop_model():
 
 def test_impossible_limit_makes_the_plan_fail_with_the_measured_value(tmp_path):
     text = step_plan_text().replace(
-        'limits: {high: settling_limit, marginal: "1 / speed_loop_bw", unit: ms}',
+        'limits: {high: settling_limit, marginal: "0.15 * settling_limit", unit: ms}',
         "limits: {high: 20, unit: ms}")
     plan = parse_plan(text, "impossible.yaml", tmp_path)
     result, signals = model_run(plan)
@@ -268,7 +268,7 @@ def test_html_report_is_self_contained_with_plots(paper_step_run, tmp_path):
         assert c.name in html
     assert "Speed (Fig. 4a / 6a)" in html and "1500 to 3000 rpm" in html
     # the settling limit is a formula (the ramp plus 4.3 / w_b): its value and its formula
-    assert "&lt;= 199.668 ms (marginal within 31.8223 ms)" in html
+    assert "&lt;= 199.668 ms (marginal within 29.9502 ms)" in html
     assert "<code class=\"formula\">settling_limit</code>" in html
     assert "speed_loop_bw = 31.4245 rad/s" in html
 
