@@ -328,13 +328,18 @@ steps:
         "02_steady_state.yaml": f"""name: {n.name}-steady-state
 description: |
   Rated speed ({rated:g} rpm), no load, encoder feedback.
-  Limits: mean speed within 0.5 % (a speed loop with integral action has no steady error); the
-  torque stays inside the torque limit {d.torque_limit_nm:.4g} N m (derived:
+  Limits (formulas of profile.yaml and the drive's current limit): mean speed within 0.5 %
+  (a speed loop with integral action has no steady error); the torque stays within 10 % of
+  the torque limit 3/2 p psi_f I ({d.torque_limit_nm:.4g} N m on this nameplate; derived:
 {derivation}
   ).
-{common}steps:
-  - command: {{enable: true, speed_source: encoder, speed_ref_rpm: {rated:g}}}
-  - wait_until: {{signal: plant.speed_rpm, comparison: within, value: {rated:g}, tolerance: {0.01 * rated:g},
+{common}constants:
+  speed: {{value: "motor.rated_speed_rpm", unit: rpm}}
+  current_limit: {{value: {_num(d.current_limit_a)}, unit: A}}
+  torque_limit: {{value: "1.5 * motor.pole_pairs * motor.flux_linkage_wb * current_limit", unit: Nm}}
+steps:
+  - command: {{enable: true, speed_source: encoder, speed_ref_rpm: speed}}
+  - wait_until: {{signal: plant.speed_rpm, comparison: within, value: speed, tolerance: "0.01 * speed",
                  unit: rpm, hold_s: 0.05, timeout_s: {wait_s + 0.5:.3g}}}
   - mark: steady
   - run: {{duration_s: 0.1}}
@@ -344,14 +349,14 @@ description: |
       statistic: mean
       signal: plant.speed_rpm
       window: {{from: steady}}
-      limits: {{low: {0.995 * rated:g}, high: {1.005 * rated:g}, unit: rpm}}
+      limits: {{low: "0.995 * speed", high: "1.005 * speed", unit: rpm}}
   - check:
       name: torque inside the limit
       kind: statistic
       statistic: max_abs
       signal: plant.torque_nm
       window: {{from: steady}}
-      limits: {{high: {1.1 * d.torque_limit_nm:.4g}, unit: Nm}}
+      limits: {{high: "1.1 * torque_limit", unit: Nm}}
 """,
         "03_encoder_loss.yaml": f"""name: {n.name}-encoder-loss
 description: |
@@ -389,24 +394,29 @@ description: |
 """,
         "04_dc_sag.yaml": f"""name: {n.name}-dc-sag
 description: |
-  The DC link sags to {d.sag_fraction:.2f} of {n.dc_link_v:g} V at half speed ({half:g} rpm).
-  Derived by `hil init`:
+  The DC link sags at half speed to twice the back-EMF's share of the bus, 2 sqrt(3) psi_f p
+  (w_r / 2) / Vdc, within 0.6 .. 0.9 ({d.sag_fraction:.2f} of {n.dc_link_v:g} V on this
+  nameplate). Derived by `hil init`:
 {derivation}
   Limit: the speed stays within 2 % of the reference through the sag (the bus still holds
-  twice the back-EMF's share); the drive keeps running (no FAULT).
-{common}steps:
-  - command: {{enable: true, speed_source: encoder, speed_ref_rpm: {half:g}}}
-  - wait_until: {{signal: plant.speed_rpm, comparison: within, value: {half:g}, tolerance: {0.01 * half:g},
+  twice the back-EMF's share); the drive keeps running (no FAULT). The sag and the speeds are
+  formulas of profile.yaml.
+{common}constants:
+  speed: {{value: "0.5 * motor.rated_speed_rpm", unit: rpm}}
+  sag_fraction: {{value: "min(0.9, max(0.6, 2 * sqrt(3) * motor.flux_linkage_wb * motor.pole_pairs * speed / dc_link.source_voltage_v))", unit: "1"}}
+steps:
+  - command: {{enable: true, speed_source: encoder, speed_ref_rpm: speed}}
+  - wait_until: {{signal: plant.speed_rpm, comparison: within, value: speed, tolerance: "0.01 * speed",
                  unit: rpm, hold_s: 0.02, timeout_s: {wait_s:.3g}}}
   - mark: sag
-  - dc_link: {{voltage_v: {d.sag_fraction * n.dc_link_v:.4g}, ramp_s: 0.005}}
+  - dc_link: {{voltage_v: "sag_fraction * dc_link.source_voltage_v", ramp_s: 0.005}}
   - run: {{duration_s: 0.1}}
   - check:
       name: speed held through the sag
       kind: bound
       signal: plant.speed_rpm
       window: {{from: sag}}
-      limits: {{low: {0.98 * half:g}, high: {1.02 * half:g}, unit: rpm}}
+      limits: {{low: "0.98 * speed", high: "1.02 * speed", unit: rpm}}
   - check:
       name: no board fault
       kind: final_value
