@@ -67,5 +67,19 @@ def test_anything_outside_the_whitelist_is_refused(text):
         parse(text)
 
 
+def test_long_or_deep_formulas_are_refused_not_crashed():
+    for text in ["1+" * 249 + "1", "(" * 240 + "1" + ")" * 240, "-" * 499 + "1"]:
+        try:
+            evaluate(text, VALUES, "1")
+        except FormulaError:
+            pass                                    # refused with a message: fine
+    with pytest.raises(FormulaError, match="at most 500"):
+        parse("1+" * 300 + "1")
+    with pytest.raises(FormulaError):
+        evaluate("1e308 * 1e308", VALUES, "1")      # not finite
+    with pytest.raises(FormulaError):
+        evaluate("(0 - 8) ** (1 / 3)", VALUES, "1")  # no real value
+
+
 def test_names_in_lists_dotted_names_once():
     assert sorted(names_in("a.b.c * a.b.c + sqrt(d) + pi")) == ["a.b.c", "d", "pi"]

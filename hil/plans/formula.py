@@ -117,6 +117,7 @@ class Derivation:
 _BINOPS = (ast.Add, ast.Sub, ast.Mult, ast.Div, ast.Pow)
 _UNARY = (ast.USub, ast.UAdd)
 FUNCTIONS = ("sqrt", "min", "max", "abs", "exp", "log")
+MAX_LENGTH = 500        # keeps the tree shallow: the walks below recurse
 CONSTANTS = {"pi": math.pi}
 
 
@@ -133,13 +134,15 @@ def parse(text: str) -> ast.Expression:
     """The checked syntax tree of a formula; FormulaError for anything outside the whitelist."""
     if not isinstance(text, str) or not text.strip():
         raise FormulaError("a formula is a non-empty string")
-    if len(text) > 2000:
-        raise FormulaError("a formula is at most 2000 characters")
+    if len(text) > MAX_LENGTH:
+        raise FormulaError(f"a formula is at most {MAX_LENGTH} characters")
     try:
         tree = ast.parse(text.strip(), mode="eval")
+        _check_node(tree.body, text)
     except SyntaxError as exc:
         raise FormulaError(f"formula '{text}' is not an expression: {exc.msg}") from None
-    _check_node(tree.body, text)
+    except (RecursionError, MemoryError):
+        raise FormulaError(f"formula '{text[:60]}...' is nested too deeply") from None
     return tree
 
 
@@ -317,6 +320,8 @@ def evaluate(text: str, values: Mapping[str, tuple[float, str]], result_unit: st
         value, dims = ev(tree.body)
     except (ZeroDivisionError, OverflowError) as exc:
         raise ev.err(str(exc)) from None
+    except RecursionError:
+        raise ev.err("is nested too deeply") from None
     if dims != want:
         raise ev.err(f"gives {describe_dims(dims)}, which is not {result_unit} "
                      f"({describe_dims(want)})")
