@@ -88,6 +88,21 @@ def test_a_formula_that_fails_on_another_listed_profile_fails_the_plan(tmp_path)
     assert hil_main(["plans", str(path)]) == 2
 
 
+def test_a_value_a_formula_gives_is_checked_on_every_listed_profile(tmp_path):
+    """A formula that evaluates on each profile but gives a value the format refuses on one
+    (a negative duration on a slow motor) fails the plan when it loads, naming the key."""
+    slow = tmp_path / "slow.yaml"
+    slow.write_text("motor: {rated_speed_rpm: 500.0}\n")
+    path = tmp_path / "plan.yaml"
+    path.write_text(f"profiles: [paper, {slow}]\n" + SMALL.replace("HIGH", "1").replace(
+        "  - run: {duration_s: 0.02}",
+        '  - run: {duration_s: "(speed_target - 1000 * ramp_time / ramp_time * rpm) / speed_target * second"}'
+    ).replace("constants:\n", "constants:\n  rpm: {value: 1, unit: rpm}\n  second: {value: 1, unit: s}\n"))
+    with pytest.raises(ConfigError) as info:
+        load_plan(path)
+    assert info.value.key == "steps[2].run.duration_s" and "greater than 0" in info.value.message
+
+
 def test_a_bad_constant_names_its_key(tmp_path):
     path = tmp_path / "plan.yaml"
     path.write_text(SMALL.replace("HIGH", "1").replace(

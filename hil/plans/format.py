@@ -640,12 +640,12 @@ def _build(doc: YamlDocument, path: Path, context=None) -> Plan:
     formula_profile = None
     if plan_formulas.has_formulas(data):
         contexts = [context] if context is not None else plan_formulas.plan_contexts(doc, path, resolve_profile)
-        for i, (label, profile, board) in enumerate(contexts):
-            values = plan_formulas.named_values(profile, board, label)
-            bound = plan_formulas.substitute(doc, values)
-            if i == 0:
-                data, derivations, constants = bound
-                formula_profile = label
+        label, profile, board = contexts[0]
+        data, derivations, constants = plan_formulas.substitute(
+            doc, plan_formulas.named_values(profile, board, label))
+        formula_profile = label
+        for other in contexts[1:]:
+            _build(original, path, context=other)   # the plan is valid on each profile it lists
         doc = YamlDocument(data, doc.source, doc.lines)
     # jsonschema only for a plan the quick check does not accept (plant_rt.profile)
     v = SchemaChecker(doc, {LINK_PATTERN: "stub, stub-pty, stub-can, qemu, serial:PORT or can:INTERFACE:CHANNEL"})
