@@ -231,27 +231,59 @@ def test_board_option_overrides_the_plans_board(tmp_path):
     assert "board FAULT 1 OVERCURRENT" in record["reason"]
 
 
-@pytest.mark.parametrize("edit", ["pole_pairs", "inertia"])
-def test_limits_fail_a_plant_that_is_not_the_nameplate(tmp_path, edit):
-    """The servo's project, its profile edited after generation (the board file unchanged):
-    twice the pole pairs (the same flux per pole pair: twice the torque per ampere, half the
-    speed the DC link supports) or ten times the inertia. The speed step's derived limits fail
-    (FAIL, not ERROR or TIMEOUT): they come from the motor."""
+def test_limits_fail_a_plant_that_is_not_the_nameplate(tmp_path):
+    """The servo's project, its profile edited after generation to twice the pole pairs (the
+    same flux per pole pair: twice the torque per ampere, half the speed the DC link supports;
+    the board file unchanged). The speed step's limits are formulas of the profile, so they
+    move (the torque limit 3/2 p psi_f I doubles, the ramp halves), but the board's tuning,
+    made for the nameplate, does not follow: the rise time FAILs (not ERROR or TIMEOUT)."""
     options, _ = MOTORS["servo"]
     project = tmp_path / "servo"
     assert hil_main(["init", str(project), "--name", "servo", *options]) == 0
     profile = project / "profile.yaml"
     text = profile.read_text()
-    if edit == "pole_pairs":
-        edited = text.replace("  pole_pairs: 4\n", "  pole_pairs: 8\n")
-    else:
-        edited = text.replace("  inertia_kgm2: 0.0004\n", "  inertia_kgm2: 0.004\n")
+    edited = text.replace("  pole_pairs: 4\n", "  pole_pairs: 8\n")
     assert edited != text
     profile.write_text(edited)
     [record] = _run_plans(project, ["01_speed_step"], tmp_path / "out")
     assert record["outcome"] == "FAIL", record.get("reason")
     failed = {c["name"] for c in record["checks"] if c["outcome"] == "FAIL"}
     assert "rise time 10-90 %" in failed
+
+
+def test_a_profile_value_moves_the_derived_limits_in_result_json(tmp_path):
+    """The speed step's rise-time limits are 0.9 .. 2.0 x 0.8 J dw / T_lim with J the profile's:
+    ten times the inertia in profile.yaml (nothing else edited) gives ten times the limits in
+    result.json, with the formula and the profile's inertia among its inputs."""
+    options, _ = MOTORS["servo"]
+    project = tmp_path / "servo"
+    assert hil_main(["init", str(project), "--name", "servo", *options]) == 0
+    plan = [str(project / "plans" / "01_speed_step.yaml")]
+
+    def rise(out: str) -> dict:
+        hil_main(["run", *plan, "--link", "stub", "--out", str(tmp_path / out), "--no-progress"])
+        [path] = (tmp_path / out).glob("**/result.json")
+        record = json.loads(path.read_text())
+        return next(c for c in record["checks"] if c["name"] == "rise time 10-90 %")
+
+    before = rise("before")
+    profile = project / "profile.yaml"
+    text = profile.read_text()
+    edited = text.replace("  inertia_kgm2: 0.0004\n", "  inertia_kgm2: 0.004\n")
+    assert edited != text
+    profile.write_text(edited)
+    after = rise("after")
+    for bound in ("low", "high"):
+        assert after["limits"][bound] == pytest.approx(10 * before["limits"][bound], rel=1e-9)
+        formula = after["limit_formulas"][bound]
+        assert formula["value"] == pytest.approx(after["limits"][bound])
+    inputs = {i["name"]: i for i in after["limit_formulas"]["low"]["inputs"]}
+    assert inputs["ramp_time"]["value"] == pytest.approx(
+        10 * {i["name"]: i for i in before["limit_formulas"]["low"]["inputs"]}["ramp_time"]["value"])
+    assert after["limit_formulas"]["low"]["formula"] == "0.9 * 0.8 * ramp_time"
+    # the constants' own inputs are listed too: the profile's inertia, as the edited file has it
+    assert inputs["motor.inertia_kgm2"]["value"] == pytest.approx(0.004)
+    assert inputs["motor.inertia_kgm2"]["unit"] == "kgm^2"
 
 
 # ------------------------------------------------------------------ CI files

@@ -57,9 +57,19 @@ def _pairs_of_plan(data: dict):
 
 def _documents():
     """Every plan and profile of the repository, with the schemas each is checked against."""
+    from hil.plans import plan_formulas
+    from hil.plans.format import resolve_profile
+
     for path in sorted((REPO / "test_plans").rglob("*.y*ml")):
-        data = load_yaml(path).data
+        doc = load_yaml(path)
+        data = doc.data
         if isinstance(data, dict) and "steps" in data:
+            if plan_formulas.has_formulas(data):
+                # what the loader validates: the plan with its formulas evaluated (on its
+                # first profile)
+                label, profile, board = plan_formulas.plan_contexts(doc, path, resolve_profile)[0]
+                data = plan_formulas.substitute(
+                    doc, plan_formulas.named_values(profile, board, label))[0]
             for schema, value in _pairs_of_plan(data):
                 yield path.name, schema, value
     for path in sorted((REPO / "plant_rt" / "profiles").glob("*.yaml")):

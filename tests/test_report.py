@@ -197,8 +197,9 @@ def test_paper_load_step_limits_hold_on_the_loop_model():
 
 
 def test_impossible_limit_makes_the_plan_fail_with_the_measured_value(tmp_path):
-    text = step_plan_text().replace("limits: {high: 200, marginal: 30, unit: ms}",
-                                               "limits: {high: 20, unit: ms}")
+    text = step_plan_text().replace(
+        'limits: {high: settling_limit, marginal: "0.15 * settling_limit", unit: ms}',
+        "limits: {high: 20, unit: ms}")
     plan = parse_plan(text, "impossible.yaml", tmp_path)
     result, signals = model_run(plan)
     assert result.outcome is Outcome.FAIL
@@ -218,7 +219,7 @@ def test_impossible_limit_makes_the_plan_fail_with_the_measured_value(tmp_path):
 
 
 def test_timeout_plan_reports_error_testcase_and_skipped_checks(tmp_path):
-    text = step_plan_text().replace("hold_s: 0.02, timeout_s: 0.5", "hold_s: 0.02, timeout_s: 0.05")
+    text = step_plan_text().replace('timeout_s: "8 * ramp_time"', "timeout_s: 0.05")
     plan = parse_plan(text, "short.yaml", tmp_path)
     result, signals = model_run(plan)
     assert result.outcome is Outcome.TIMEOUT and "not met within 0.05 s" in result.reason
@@ -266,7 +267,10 @@ def test_html_report_is_self_contained_with_plots(paper_step_run, tmp_path):
     for c in plan.checks:
         assert c.name in html
     assert "Speed (Fig. 4a / 6a)" in html and "1500 to 3000 rpm" in html
-    assert "&lt;= 200 ms (marginal within 30 ms)" in html
+    # the settling limit is a formula (the ramp plus 4.3 / w_b): its value and its formula
+    assert "&lt;= 199.668 ms (marginal within 29.9502 ms)" in html
+    assert "<code class=\"formula\">settling_limit</code>" in html
+    assert "speed_loop_bw = 31.4245 rad/s" in html
 
 
 def test_report_reloads_plots_from_the_source_and_summary_links(paper_step_run, tmp_path):
@@ -356,7 +360,7 @@ def test_plugin_shows_an_invalid_plan_as_a_collection_error(pytester, fake_runne
 
 def test_plugin_plan_item_fails_on_timeout(pytester, fake_runner):
     plans = pytester.mkdir("test_plans")
-    text = step_plan_text().replace("hold_s: 0.02, timeout_s: 0.5", "hold_s: 0.02, timeout_s: 0.05")
+    text = step_plan_text().replace('timeout_s: "8 * ramp_time"', "timeout_s: 0.05")
     (plans / "short.yaml").write_text(text)
     result = pytester.runpytest("test_plans", *PLUGIN_ARGS)
     n = len(load_plan(PAPER_STEP_PLAN).checks)

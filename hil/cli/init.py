@@ -252,11 +252,8 @@ name: my firmware
 def _plans(n: Nameplate, d: Derived) -> dict[str, str]:
     half = 0.5 * n.rated_speed_rpm
     rated = n.rated_speed_rpm
-    ramp_ms = d.ramp_s * 1e3
-    # 10-90 % of the step at the torque limit takes 0.8 of the ramp; a speed loop that leaves
-    # the limit early may take up to twice that
-    rise_lo, rise_hi = 0.8 * ramp_ms * 0.9, 0.8 * ramp_ms * 2.0
-    settle_ms = 5.0 * ramp_ms + 100.0
+    # the speed step's limits are formulas in its plan (the profile's values, evaluated before
+    # each run); the other plans' waits use the nameplate's ramp
     wait_s = max(0.5, 4.0 * d.ramp_s + 0.3)
     # Each plan runs on the project's profile and, unless --board says otherwise, on the stub
     # tuned for the motor: `hil run plans/ --link stub` passes out of the box.
@@ -265,67 +262,84 @@ def _plans(n: Nameplate, d: Derived) -> dict[str, str]:
     return {
         "01_speed_step.yaml": f"""name: {n.name}-speed-step
 description: |
-  Half to rated speed ({half:g} -> {rated:g} rpm) with encoder feedback.
-  Derived by `hil init` from the nameplate:
+  Half to rated speed with encoder feedback. Every limit is a formula of the bench profile
+  (profile.yaml: motor.*), the drive's current limit and the constants below, evaluated
+  before each run (hil-bench test_plans/README.md, "Formulas"): change the profile and the
+  limits follow. On this nameplate (`hil init`):
 {derivation}
   Limits:
-  - rise time 10-90 %: at the torque limit 0.8 of the ramp = {0.8 * ramp_ms:.4g} ms; from 0.9 of
-    that (the limit reached at once) to twice it (a loop that leaves the limit early):
-    {rise_lo:.4g} .. {rise_hi:.4g} ms.
+  - rise time 10-90 %: at the torque limit 0.8 of the ramp J dw / T_lim; from 0.9 of that
+    (the limit reached at once) to twice it (a loop that leaves the limit early).
   - overshoot <= 20 %: a requirement (a speed loop designed for about 50 deg phase margin
     overshoots 15-20 % on a torque-limited step), not physics; tighten it to your design.
-  - settling to 2 % within five ramps plus 100 ms = {settle_ms:.4g} ms.
+  - settling to 2 % within five ramps plus 100 ms.
   - final speed within 1 % of the reference.
-{common}steps:
-  - command: {{enable: true, speed_source: encoder, speed_ref_rpm: {half:g}}}
-  - wait_until: {{signal: plant.speed_rpm, comparison: within, value: {half:g}, tolerance: {0.01 * half:g},
-                 unit: rpm, hold_s: 0.02, timeout_s: {wait_s:.3g}}}
+{common}constants:
+  second: {{value: 1, unit: s}}
+  speed_start: {{value: "0.5 * motor.rated_speed_rpm", unit: rpm}}
+  speed_target: {{value: "motor.rated_speed_rpm", unit: rpm}}
+  # the drive's peak phase current (the nameplate's): the torque limit 3/2 p psi_f I follows
+  current_limit: {{value: {_num(d.current_limit_a)}, unit: A}}
+  torque_limit: {{value: "1.5 * motor.pole_pairs * motor.flux_linkage_wb * current_limit", unit: Nm}}
+  # the torque-limited ramp from half to rated speed, J dw / T_lim
+  ramp_time: {{value: "motor.inertia_kgm2 * (speed_target - speed_start) / torque_limit", unit: ms}}
+  settling_limit: {{value: "5 * ramp_time + 0.1 * second", unit: ms}}
+steps:
+  - command: {{enable: true, speed_source: encoder, speed_ref_rpm: speed_start}}
+  - wait_until: {{signal: plant.speed_rpm, comparison: within, value: speed_start,
+                 tolerance: "0.01 * speed_start", unit: rpm, hold_s: 0.02,
+                 timeout_s: "max(0.5 * second, 4 * ramp_time + 0.3 * second)"}}
   - mark: step
-  - command: {{speed_ref_rpm: {rated:g}}}
-  - run: {{duration_s: {settle_ms / 1e3 + 0.1:.3g}}}
+  - command: {{speed_ref_rpm: speed_target}}
+  - run: {{duration_s: "settling_limit + 0.1 * second"}}
   - check:
       name: rise time 10-90 %
       kind: rise_time
       signal: plant.speed_rpm
       window: {{from: step}}
-      initial: {{value: {half:g}, unit: rpm}}
-      target: {{value: {rated:g}, unit: rpm}}
-      limits: {{low: {rise_lo:.4g}, high: {rise_hi:.4g}, unit: ms}}
+      initial: {{value: speed_start, unit: rpm}}
+      target: {{value: speed_target, unit: rpm}}
+      limits: {{low: "0.9 * 0.8 * ramp_time", high: "2.0 * 0.8 * ramp_time", unit: ms}}
   - check:
       name: overshoot
       kind: overshoot
       signal: plant.speed_rpm
       window: {{from: step}}
-      initial: {{value: {half:g}, unit: rpm}}
-      target: {{value: {rated:g}, unit: rpm}}
+      initial: {{value: speed_start, unit: rpm}}
+      target: {{value: speed_target, unit: rpm}}
       limits: {{high: 20, unit: "%"}}
   - check:
       name: settling within 2 %
       kind: settling_time
       signal: plant.speed_rpm
       window: {{from: step}}
-      initial: {{value: {half:g}, unit: rpm}}
-      target: {{value: {rated:g}, unit: rpm}}
+      initial: {{value: speed_start, unit: rpm}}
+      target: {{value: speed_target, unit: rpm}}
       band_pct: 2
-      limits: {{high: {settle_ms:.4g}, unit: ms}}
+      limits: {{high: settling_limit, unit: ms}}
   - check:
       name: final speed
       kind: final_value
       signal: plant.speed_rpm
       average_s: 0.05
       window: {{from: step}}
-      limits: {{low: {0.99 * rated:g}, high: {1.01 * rated:g}, unit: rpm}}
+      limits: {{low: "0.99 * speed_target", high: "1.01 * speed_target", unit: rpm}}
 """,
         "02_steady_state.yaml": f"""name: {n.name}-steady-state
 description: |
   Rated speed ({rated:g} rpm), no load, encoder feedback.
-  Limits: mean speed within 0.5 % (a speed loop with integral action has no steady error); the
-  torque stays inside the torque limit {d.torque_limit_nm:.4g} N m (derived:
+  Limits (formulas of profile.yaml and the drive's current limit): mean speed within 0.5 %
+  (a speed loop with integral action has no steady error); the torque stays within 10 % of
+  the torque limit 3/2 p psi_f I ({d.torque_limit_nm:.4g} N m on this nameplate; derived:
 {derivation}
   ).
-{common}steps:
-  - command: {{enable: true, speed_source: encoder, speed_ref_rpm: {rated:g}}}
-  - wait_until: {{signal: plant.speed_rpm, comparison: within, value: {rated:g}, tolerance: {0.01 * rated:g},
+{common}constants:
+  speed: {{value: "motor.rated_speed_rpm", unit: rpm}}
+  current_limit: {{value: {_num(d.current_limit_a)}, unit: A}}
+  torque_limit: {{value: "1.5 * motor.pole_pairs * motor.flux_linkage_wb * current_limit", unit: Nm}}
+steps:
+  - command: {{enable: true, speed_source: encoder, speed_ref_rpm: speed}}
+  - wait_until: {{signal: plant.speed_rpm, comparison: within, value: speed, tolerance: "0.01 * speed",
                  unit: rpm, hold_s: 0.05, timeout_s: {wait_s + 0.5:.3g}}}
   - mark: steady
   - run: {{duration_s: 0.1}}
@@ -335,14 +349,14 @@ description: |
       statistic: mean
       signal: plant.speed_rpm
       window: {{from: steady}}
-      limits: {{low: {0.995 * rated:g}, high: {1.005 * rated:g}, unit: rpm}}
+      limits: {{low: "0.995 * speed", high: "1.005 * speed", unit: rpm}}
   - check:
       name: torque inside the limit
       kind: statistic
       statistic: max_abs
       signal: plant.torque_nm
       window: {{from: steady}}
-      limits: {{high: {1.1 * d.torque_limit_nm:.4g}, unit: Nm}}
+      limits: {{high: "1.1 * torque_limit", unit: Nm}}
 """,
         "03_encoder_loss.yaml": f"""name: {n.name}-encoder-loss
 description: |
@@ -380,24 +394,29 @@ description: |
 """,
         "04_dc_sag.yaml": f"""name: {n.name}-dc-sag
 description: |
-  The DC link sags to {d.sag_fraction:.2f} of {n.dc_link_v:g} V at half speed ({half:g} rpm).
-  Derived by `hil init`:
+  The DC link sags at half speed to twice the back-EMF's share of the bus, 2 sqrt(3) psi_f p
+  (w_r / 2) / Vdc, within 0.6 .. 0.9 ({d.sag_fraction:.2f} of {n.dc_link_v:g} V on this
+  nameplate). Derived by `hil init`:
 {derivation}
   Limit: the speed stays within 2 % of the reference through the sag (the bus still holds
-  twice the back-EMF's share); the drive keeps running (no FAULT).
-{common}steps:
-  - command: {{enable: true, speed_source: encoder, speed_ref_rpm: {half:g}}}
-  - wait_until: {{signal: plant.speed_rpm, comparison: within, value: {half:g}, tolerance: {0.01 * half:g},
+  twice the back-EMF's share); the drive keeps running (no FAULT). The sag and the speeds are
+  formulas of profile.yaml.
+{common}constants:
+  speed: {{value: "0.5 * motor.rated_speed_rpm", unit: rpm}}
+  sag_fraction: {{value: "min(0.9, max(0.6, 2 * sqrt(3) * motor.flux_linkage_wb * motor.pole_pairs * speed / dc_link.source_voltage_v))", unit: "1"}}
+steps:
+  - command: {{enable: true, speed_source: encoder, speed_ref_rpm: speed}}
+  - wait_until: {{signal: plant.speed_rpm, comparison: within, value: speed, tolerance: "0.01 * speed",
                  unit: rpm, hold_s: 0.02, timeout_s: {wait_s:.3g}}}
   - mark: sag
-  - dc_link: {{voltage_v: {d.sag_fraction * n.dc_link_v:.4g}, ramp_s: 0.005}}
+  - dc_link: {{voltage_v: "sag_fraction * dc_link.source_voltage_v", ramp_s: 0.005}}
   - run: {{duration_s: 0.1}}
   - check:
       name: speed held through the sag
       kind: bound
       signal: plant.speed_rpm
       window: {{from: sag}}
-      limits: {{low: {0.98 * half:g}, high: {1.02 * half:g}, unit: rpm}}
+      limits: {{low: "0.98 * speed", high: "1.02 * speed", unit: rpm}}
   - check:
       name: no board fault
       kind: final_value

@@ -758,7 +758,11 @@ def evaluate_check(spec: "CheckStep", signals: SignalSet, marks: Mapping[str, fl
     where = f"{spec.source}:{spec.line}: check '{spec.name}'"
     check_role = getattr(spec, "role", "acceptance")
     note = getattr(spec, "note", "")
+    if hasattr(spec, "role_for"):
+        check_role, note = spec.role_for(profile)
     spec_limits = spec.limits_for(profile) if hasattr(spec, "limits_for") else spec.limits
+    formulas = ({k: d.to_json() for k, d in spec.derivations_for(profile).items()}
+                if hasattr(spec, "derivations_for") else {})
     unit = spec_limits.unit if spec_limits is not None else (kind.result_unit
                                                              if kind.result_unit not in ("signal", "compare") else "1")
     window: tuple[float, float] | None = None
@@ -766,14 +770,14 @@ def evaluate_check(spec: "CheckStep", signals: SignalSet, marks: Mapping[str, fl
     def error(message: str) -> CheckResult:
         return CheckResult(spec.name, spec.check_kind, Outcome.ERROR, None, unit, spec_limits,
                            f"{where}: {message}", window, spec.signals, spec.line, plot=spec.plot,
-                           role=check_role, note=note)
+                           role=check_role, note=note, formulas=formulas)
 
     def board_verdict(message: str) -> CheckResult:
         """The board did not give what the check needs: FAIL (INFO for a finding)."""
         outcome = Outcome.INFO if check_role == "finding" else Outcome.FAIL
         return CheckResult(spec.name, spec.check_kind, outcome, None, unit, spec_limits,
                            f"{where}: {message}", window, spec.signals, spec.line, plot=spec.plot,
-                           role=check_role, note=note)
+                           role=check_role, note=note, formulas=formulas)
 
     now = signals.end_s if now_s is None else float(now_s)
     try:
@@ -832,7 +836,7 @@ def evaluate_check(spec: "CheckStep", signals: SignalSet, marks: Mapping[str, fl
                                f"finding: the board reports no value for {_unreported(sig)} "
                                f"in the window (NaN: not computed by this board)", window,
                                spec.signals, spec.line, details, plot=spec.plot,
-                               role=check_role, note=note)
+                               role=check_role, note=note, formulas=formulas)
         if math.isnan(m.value):
             return error(m.message or "the measurement is not a number")
         shown = "inf" if math.isinf(m.value) else f"{m.value:.6g}"
@@ -840,7 +844,7 @@ def evaluate_check(spec: "CheckStep", signals: SignalSet, marks: Mapping[str, fl
         message = f"finding: measured {shown}{u}" + (f"; {m.message}" if m.message else "")
         return CheckResult(spec.name, spec.check_kind, Outcome.INFO, m.value, m.unit, None, message,
                            window, spec.signals, spec.line, details, plot=spec.plot,
-                           role=check_role, note=note)
+                           role=check_role, note=note, formulas=formulas)
     if limits is None:
         # Only kinds whose limits are optional get here (envelope: nothing outside the tube).
         limits = Limits(m.unit, high=0.0)
@@ -857,7 +861,7 @@ def evaluate_check(spec: "CheckStep", signals: SignalSet, marks: Mapping[str, fl
                                f"{where}: the board reports no value for {unreported} in the "
                                f"window (NaN: not computed by this board)", window,
                                spec.signals, spec.line, details, plot=spec.plot,
-                               role=check_role, note=note)
+                               role=check_role, note=note, formulas=formulas)
         return error(m.message or "the measurement is not a number")
     try:
         measured = limits.to_limit_unit(m.value, m.unit)
@@ -882,7 +886,7 @@ def evaluate_check(spec: "CheckStep", signals: SignalSet, marks: Mapping[str, fl
         message += f"; {m.message}"
     return CheckResult(spec.name, spec.check_kind, outcome, measured, unit, limits, message,
                        window, spec.signals, spec.line, details, plot=spec.plot,
-                       role=check_role, note=note)
+                       role=check_role, note=note, formulas=formulas)
 
 
 __all__ = ["CheckError", "CheckKind", "ArgSpec", "Role", "Measurement", "CheckContext",

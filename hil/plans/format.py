@@ -24,6 +24,7 @@ from typing import Any, ClassVar, Union
 
 from configfile.dataclass_methods import dataclass
 from hil.plans.checks import CHECK_KINDS, STATISTICS, ArgSpec, CheckKind, result_unit
+from hil.plans.formula import Derivation
 from hil.plans.limits import Limits
 from hil.plans.signals import SIGNAL_CATALOG
 from hil.plans.units import Quantity, UnitError, canonical, compatible, unit as lookup_unit
@@ -349,6 +350,14 @@ class CheckStep(StepBase):
     # Limits for named profiles where the physics differs (`profile_limits:`); the
     # others use `limits`.
     profile_limits: Mapping[str, Limits] = field(default_factory=lambda: MappingProxyType({}))
+    # The formulas behind `limits` (low/high/marginal -> Derivation) and behind each
+    # profile's `profile_limits`, as evaluated for the run (hil.plans.plan_formulas).
+    derivations: Mapping[str, Derivation] = field(default_factory=lambda: MappingProxyType({}))
+    profile_derivations: Mapping[str, Mapping[str, Derivation]] = field(
+        default_factory=lambda: MappingProxyType({}))
+    # (role, note) of a profile whose `profile_limits` entry gives its own
+    profile_roles: Mapping[str, tuple[str, str]] = field(
+        default_factory=lambda: MappingProxyType({}))
 
     @property
     def signals(self) -> tuple[str, ...]:
@@ -359,6 +368,18 @@ class CheckStep(StepBase):
         if profile is not None and profile in self.profile_limits:
             return self.profile_limits[profile]
         return self.limits
+
+    def role_for(self, profile: str | None) -> tuple[str, str]:
+        """(role, note) on a profile: its `profile_limits` entry's when it gives one."""
+        if profile is not None and profile in self.profile_roles:
+            return self.profile_roles[profile]
+        return self.role, self.note
+
+    def derivations_for(self, profile: str | None) -> Mapping[str, Derivation]:
+        """The formulas behind limits_for(profile): bound name -> Derivation."""
+        if profile is not None and profile in self.profile_limits:
+            return self.profile_derivations.get(profile, MappingProxyType({}))
+        return self.derivations
 
 
 Step = Union[CommandStep, ParamSetStep, LoadStep, DcLinkStep, PlantParamStep, FaultStep,
@@ -395,6 +416,12 @@ class Plan:
     plots: tuple[PlotSpec, ...] = ()
     profiles: tuple[ProfileRef, ...] = ()   # every profile it runs on (`profile` / `profiles`)
     expect_fault: bool = False          # a board FAULT or shoot-through does not end the plan
+    # Formulas (hil.plans.plan_formulas): the document they are re-evaluated from for each
+    # run (None: the plan has none), the profile label they were evaluated for, and the
+    # plan's constants.
+    document: YamlDocument | None = None
+    formula_profile: str | None = None
+    constants: Mapping[str, Derivation] = field(default_factory=lambda: MappingProxyType({}))
 
     @property
     def checks(self) -> tuple[CheckStep, ...]:
@@ -450,6 +477,7 @@ PLAN_SCHEMA = obj({
     "expect_fault": {"type": "boolean"},
     "steps": {"type": "array", "minItems": 1},
     "plots": {"type": "array"},
+    "constants": {"type": "object", "additionalProperties": _QUANTITY},
 }, ["name", "steps"])
 
 STEP_SCHEMAS: dict[str, dict] = {
@@ -483,10 +511,13 @@ LOAD_SCHEMAS: dict[str, dict] = {
                                ["type", "nm_per_rad_s"]),
 }
 
+# A profile's own limits may carry their own role (e.g. regression on one profile only).
+_PROFILE_LIMITS = obj({**_LIMITS["properties"], "role": {"enum": list(CHECK_ROLES)},
+                       "note": {"type": "string"}}, ["unit"])
 _CHECK_COMMON = {"name": NAME, "kind": {}, "window": _WINDOW, "limits": _LIMITS, "plot": BOOLEAN,
                  "role": {"enum": list(CHECK_ROLES)}, "note": {"type": "string"},
                  "profile_limits": {"type": "object", "minProperties": 1,
-                                    "additionalProperties": _LIMITS}}
+                                    "additionalProperties": _PROFILE_LIMITS}}
 _ARG_SCHEMAS = {"number": NUMBER, "positive": POSITIVE, "nonneg": NON_NEGATIVE, "integer": POSITIVE_INT,
                 "bool": BOOLEAN, "quantity": _QUANTITY, "check": NAME}
 
@@ -588,12 +619,38 @@ def check_control_inputs(steps: Iterable["Step"], limits: ControlLimits, source:
                                   format_key(path)) from None
 
 
-def _build(doc: YamlDocument, path: Path) -> Plan:
-    # jsonschema only for a plan the quick check does not accept (plant_rt.profile)
-    v = SchemaChecker(doc, {LINK_PATTERN: "stub, stub-pty, stub-can, qemu, serial:PORT or can:INTERFACE:CHANNEL"})
+def bind_plan(plan: Plan, profile, board, profile_label: str | None) -> Plan:
+    """The plan with its formulas evaluated for one run (its profile, with the plan's
+    overrides applied, and its board file); the plan itself when it has none. ConfigError
+    naming the file, line and key of a formula that fails on this profile or board."""
+    if plan.document is None:
+        return plan
+    return _build(plan.document, plan.source_path, context=(profile_label, profile, board))
+
+
+def _build(doc: YamlDocument, path: Path, context=None) -> Plan:
+    """context: (profile label, profile, board) to evaluate the plan's formulas against;
+    None: every profile the plan lists, with its board (hil.plans.plan_formulas)."""
+    from hil.plans import plan_formulas
+
+    original = doc
     data = doc.data
     if not isinstance(data, dict):
         raise doc.error((), f"a plan is a mapping with at least 'name' and 'steps', got {python_type(data)}")
+    derivations: dict = {}
+    constants: dict = {}
+    formula_profile = None
+    if plan_formulas.has_formulas(data):
+        contexts = [context] if context is not None else plan_formulas.plan_contexts(doc, path, resolve_profile)
+        label, profile, board = contexts[0]
+        data, derivations, constants = plan_formulas.substitute(
+            doc, plan_formulas.named_values(profile, board, label))
+        formula_profile = label
+        for other in contexts[1:]:
+            _build(original, path, context=other)   # the plan is valid on each profile it lists
+        doc = YamlDocument(data, doc.source, doc.lines)
+    # jsonschema only for a plan the quick check does not accept (plant_rt.profile)
+    v = SchemaChecker(doc, {LINK_PATTERN: "stub, stub-pty, stub-can, qemu, serial:PORT or can:INTERFACE:CHANNEL"})
     v.check(PLAN_SCHEMA, data, ())
     if "profile" in data and "profiles" in data:
         raise doc.error(("profiles",), "give either profile (one) or profiles (a list), not both")
@@ -618,7 +675,7 @@ def _build(doc: YamlDocument, path: Path) -> Plan:
         board_path = (path.parent / data["board"]).resolve()
         if not board_path.is_file():
             raise doc.error(("board",), f"board file not found: {board_path}")
-    state = _BuildState(doc, v, str(doc.source), tuple(r.label for r in refs))
+    state = _BuildState(doc, v, str(doc.source), tuple(r.label for r in refs), derivations)
     steps = tuple(state.step(raw, i) for i, raw in enumerate(data["steps"]))
     # finite and float32 now; the profile's ranges when a run has chosen its profile
     check_control_inputs(steps, UNBOUNDED, str(doc.source), doc.line_of)
@@ -630,6 +687,8 @@ def _build(doc: YamlDocument, path: Path) -> Plan:
         link=data.get("link"), board_path=board_path, mode=data.get("mode"),
         timeout_s=None if data.get("timeout_s") is None else float(data["timeout_s"]),
         plots=plots, profiles=tuple(refs), expect_fault=bool(data.get("expect_fault", False)),
+        document=original if formula_profile is not None else None,
+        formula_profile=formula_profile, constants=MappingProxyType(constants),
     )
 
 
@@ -637,8 +696,9 @@ class _BuildState:
     """Walks the steps in order, so marks and checks are known before they are used."""
 
     def __init__(self, doc: YamlDocument, v: SchemaChecker, source: str,
-                 profiles: tuple[str, ...] = ()):
+                 profiles: tuple[str, ...] = (), derivations: Mapping | None = None):
         self.doc, self.v, self.source = doc, v, source
+        self.derivations = derivations or {}
         self.profiles = profiles
         self.marks: dict[str, int] = {}             # name -> line
         self.checks: dict[str, tuple[int, str | None]] = {}  # name -> (line, measured unit)
@@ -808,21 +868,39 @@ class _BuildState:
         if "limits" in body:
             limits = self.limits(body["limits"], path + ("limits",), measured_unit, kind)
         per_profile: dict[str, Limits] = {}
+        profile_roles: dict[str, tuple[str, str]] = {}
         for label, raw in body.get("profile_limits", {}).items():
             lpath = path + ("profile_limits", label)
             if label not in self.profiles:
                 raise self.err(lpath, f"profile '{label}' is not one this plan runs on "
                                       f"({', '.join(self.profiles)})")
             per_profile[label] = self.limits(raw, lpath, measured_unit, kind)
+            if "role" in raw or "note" in raw:
+                own_role = raw.get("role", role)
+                own_note = str(raw.get("note", "")).strip()
+                if own_role == "regression" and not own_note:
+                    raise self.err(lpath + ("role",), "a regression bound needs a 'note': the "
+                                                      "measurement it came from")
+                profile_roles[label] = (own_role, own_note)
         if per_profile and limits is None:
             raise self.err(path + ("profile_limits",), "profile_limits refine 'limits': give "
                                                        "'limits' for the other profiles too")
         self.checks[name] = (common["line"], limits.unit if limits is not None else measured_unit)
+
+        def formulas(lpath: KeyPath) -> Mapping[str, Derivation]:
+            return MappingProxyType({k: self.derivations[lpath + (k,)]
+                                     for k in ("low", "high", "marginal")
+                                     if lpath + (k,) in self.derivations})
+        derived = formulas(path + ("limits",))
+        per_profile_derived = {label: formulas(path + ("profile_limits", label))
+                               for label in per_profile}
         return CheckStep(**common, name=name, check_kind=kind.name,
                          roles=MappingProxyType(roles), args=MappingProxyType(args),
                          window=window, limits=limits, source=self.source,
                          plot=bool(body.get("plot", True)), role=role, note=note,
-                         profile_limits=MappingProxyType(per_profile))
+                         profile_limits=MappingProxyType(per_profile), derivations=derived,
+                         profile_derivations=MappingProxyType(per_profile_derived),
+                         profile_roles=MappingProxyType(profile_roles))
 
     def kind_rules(self, kind: CheckKind, body: dict, args: dict, path: KeyPath) -> None:
         if kind.name == "settling_time" and "band" in body and "band_pct" in body:
@@ -955,6 +1033,6 @@ def _opt_float(x: Any) -> float | None:
 __all__ = ["Plan", "Step", "StepBase", "CommandStep", "ParamSetStep", "LoadStep", "DcLinkStep",
            "PlantParamStep", "FaultStep", "RunStep", "WaitUntilStep", "WaitReadyStep", "MarkStep", "CheckStep",
            "Window", "PlotSpec", "ProfileRef", "CHECK_ROLES", "resolve_profile", "named_profile_path",
-           "named_profile_names", "load_plan", "parse_plan", "plan_files", "looks_like_plan", "BOARD_PARAMS",
+           "named_profile_names", "load_plan", "parse_plan", "bind_plan", "plan_files", "looks_like_plan", "BOARD_PARAMS",
            "PLANT_PARAMS", "FAULTS", "PROFILE_NAMES", "SPEED_SOURCES", "MODES", "WAIT_COMPARISONS", "LOAD_TYPES",
            "STATISTICS", "ConfigError"]

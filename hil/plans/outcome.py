@@ -59,6 +59,9 @@ class CheckResult:
     plot: bool = True            # the plan wants this check's window plotted
     role: str = "acceptance"     # acceptance | regression | finding (hil.plans.format.CHECK_ROLES)
     note: str = ""               # the plan's note on the check (where a regression bound came from)
+    # The formulas the limits came from: bound (low/high/marginal) -> Derivation as JSON
+    # (formula, value, unit, inputs), hil.plans.formula.
+    formulas: dict[str, Any] = field(default_factory=dict)
 
     def to_json(self) -> dict:
         return {
@@ -66,6 +69,7 @@ class CheckResult:
             "role": self.role, "note": self.note,
             "measured": _num(self.measured), "unit": self.unit,
             "limits": None if self.limits is None else self.limits.to_json(),
+            "limit_formulas": dict(self.formulas),
             "message": self.message,
             "window": None if self.window is None else [_num(self.window[0]), _num(self.window[1])],
             "signals": list(self.signals), "line": self.line, "plot": self.plot,
@@ -83,7 +87,8 @@ class CheckResult:
                    window=None if window is None else (float(window[0]), float(window[1])),
                    signals=tuple(data.get("signals", ())), line=data.get("line"),
                    details=dict(data.get("details", {})), plot=bool(data.get("plot", True)),
-                   role=data.get("role", "acceptance"), note=data.get("note", ""))
+                   role=data.get("role", "acceptance"), note=data.get("note", ""),
+                   formulas=dict(data.get("limit_formulas") or {}))
 
 
 @dataclass(frozen=True)

@@ -382,6 +382,31 @@ def _fmt(value: float | None) -> str:
     return f"{value:.5g}"
 
 
+def _unit_text(unit: str) -> str:
+    return "" if unit == "1" else f" {unit}"
+
+
+def _derivation_html(d: dict) -> str:
+    """A formula with its inputs: the formula, then 'name = value unit' per input."""
+    items = []
+    for i in d.get("inputs", ()):
+        items.append(f"<li>{escape(i['name'])} = {float(i['value']):.6g}{escape(_unit_text(i['unit']))}</li>")
+    inputs = f"<ul class=\"inputs\">{''.join(items)}</ul>" if items else ""
+    return f"<code class=\"formula\">{escape(d['formula'])}</code>{inputs}"
+
+
+def _formulas_html(formulas: dict) -> str:
+    """Under a check's limits: each bound's formula, its value and its inputs."""
+    if not formulas:
+        return ""
+    rows = []
+    for bound, d in formulas.items():
+        value = f"{float(d['value']):.6g}{_unit_text(d['unit'])}"
+        rows.append(f"<div class=\"derivation\">{escape(bound)} = {escape(value)}: "
+                    f"{_derivation_html(d)}</div>")
+    return f"<div class=\"formulas\">{''.join(rows)}</div>"
+
+
 def _img(b64: str | None, alt: str) -> str:
     if b64 is None:
         return '<p class="muted">(no plot: the data is not available)</p>'
@@ -408,6 +433,12 @@ def html_report(result: PlanResult, signals: SignalSet, plots: Sequence = ()) ->
                                                   for k, v in meta) + "</table>")
     if result.description:
         parts.append(f"<h2>Description</h2><pre>{e(result.description)}</pre>")
+    constants = result.extra.get("constants") or {}
+    if constants:
+        parts.append("<h2>Constants</h2><table><tr><th>name</th><th>value</th><th>formula and inputs</th></tr>"
+                     + "".join(f"<tr><td>{e(name)}</td><td class=\"num\">{e(_fmt(d['value']))} {e(d['unit'])}</td>"
+                               f"<td>{_derivation_html(d)}</td></tr>" for name, d in constants.items())
+                     + "</table>")
 
     parts.append("<h2>Verdicts</h2>")
     for role, title in ROLE_TITLES.items():
@@ -422,7 +453,7 @@ def html_report(result: PlanResult, signals: SignalSet, plots: Sequence = ()) ->
             unit = "" if c.unit == "1" else f" {c.unit}"
             limits = c.limits.describe() if c.limits is not None else "-"
             parts.append(f"<tr><td>{i}</td><td><a href=\"#check-{i}\">{e(c.name)}</a></td><td>{e(c.kind)}</td>"
-                         f"<td class=\"num\">{e(_fmt(c.measured))}{e(unit)}</td><td>{e(limits)}</td>"
+                         f"<td class=\"num\">{e(_fmt(c.measured))}{e(unit)}</td><td>{e(limits)}{_formulas_html(c.formulas)}</td>"
                          f"<td>{_badge(c.outcome.value)}</td><td>{e(c.message)}</td>"
                          + (f"<td>{e(c.note)}</td>" if role != "acceptance" else "") + "</tr>")
         parts.append("</table>")

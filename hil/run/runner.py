@@ -29,7 +29,7 @@ from hil.plans.checks import evaluate_check
 from hil.plans.outcome import CheckResult, Outcome, PlanResult, StepResult, plan_outcome
 from hil.plans.format import (
     PROFILE_NAMES, CheckStep, ProfileRef, resolve_profile, CommandStep, DcLinkStep, FaultStep, LoadStep, MarkStep, ParamSetStep,
-    Plan, PlantParamStep, RunStep, WaitReadyStep, WaitUntilStep, check_control_inputs, load_plan,
+    Plan, PlantParamStep, RunStep, WaitReadyStep, WaitUntilStep, bind_plan, check_control_inputs, load_plan,
     plan_files,
 )
 from hil.logs.recorder import SENSOR_FIELDS, TELEMETRY_FIELDS, COMMAND_FIELDS
@@ -387,6 +387,8 @@ def _run(plan: Plan, opts: RunOptions) -> tuple[PlanResult, SignalSet]:
     try:
         profile = profile_for(plan, ref)
         board = board_for(plan, link, opts.board)
+        # the plan's formulas (limits, stimuli) evaluated with this run's profile and board
+        plan = bind_plan(plan, profile, board, ref.label)
         check_plan_board(plan, board)
         # the plan's commands and loads within this profile's ranges, before any period
         check_control_inputs(plan.steps, ControlLimits.from_profile(profile), str(plan.source_path))
@@ -459,6 +461,8 @@ def _run(plan: Plan, opts: RunOptions) -> tuple[PlanResult, SignalSet]:
     outcome, reason = plan_outcome(steps, checks, error=error, aborted=aborted, timeout=timeout,
                                    skipped=skipped, tripped=tripped)
     extra: dict[str, Any] = {}
+    if plan.constants:
+        extra["constants"] = {name: d.to_json() for name, d in plan.constants.items()}
     if session is not None:
         extra["board"] = session.board_name
         extra["board_file"] = session.board.summary()

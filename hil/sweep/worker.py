@@ -58,8 +58,11 @@ def run_one(task: dict) -> dict:
         log = None
     row.update(
         plan=result.plan_name, outcome=result.outcome.value, reason=result.reason,
+        # each run's limits: formulas evaluated with this run's sampled profile
         checks=[{"name": c.name, "measured": _num(c.measured), "unit": c.unit,
-                 "outcome": c.outcome.value} for c in result.checks],
+                 "outcome": c.outcome.value,
+                 "limits": None if c.limits is None else c.limits.to_json()}
+                for c in result.checks],
         sim_s=float(result.sim_duration_s), run_wall_s=float(result.wall_duration_s), log=log,
         wall_s=time.monotonic() - t0)
     return row
