@@ -178,7 +178,10 @@ def validate_run(plan: Plan, ref: ProfileRef, link: str | None = None, board=Non
         # the profile's own file, line and key, and the plan that runs on it
         raise ConfigError(f"{exc.message} (profile '{ref.label}' of plan "
                           f"{plan.source_path})", exc.source, exc.line, exc.key) from None
-    check_plan_board(plan, board_for(plan, link, board))
+    board_file = board_for(plan, link, board)
+    # formulas (limits, stimuli) evaluated for this profile and board, as the run will
+    plan = bind_plan(plan, profile, board_file, ref.label)
+    check_plan_board(plan, board_file)
     check_control_inputs(plan.steps, ControlLimits.from_profile(profile), str(plan.source_path))
 
 
