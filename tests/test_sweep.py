@@ -332,3 +332,22 @@ def test_a_sweep_naming_a_program_link_runs_only_with_allow_programs(tmp_path, c
     ours = tmp_path / "ours"
     ours.mkdir()
     check_programs_allowed(load_sweep(write_sweep(ours)), allow_programs=False)   # link: stub
+
+
+def test_a_sweeps_board_file_is_the_board_of_every_run(tmp_path):
+    """`board:` (relative to the sweep file) applies to each run: a board file that promises a
+    capability the stub lacks makes every run end ERROR naming it; a bad board file fails the
+    sweep at load, naming its own file, line and key."""
+    (tmp_path / "promise.yaml").write_text("name: promises DUTY_LEGS\ncapabilities: [DUTY_LEGS]\n")
+    path = tmp_path / "short.sweep.yaml"
+    path.write_text(sweep_text(runs=2).replace("  seed: 5\n", "  seed: 5\n  board: promise.yaml\n"))
+    s = load_sweep(path)
+    assert s.board_path == (tmp_path / "promise.yaml").resolve()
+    run_sweep(s, tmp_path / "out", workers=1, progress=False, stall_timeout_s=120)
+    rows = json.loads((tmp_path / "out" / "results.json").read_text())
+    assert [r["outcome"] for r in rows] == ["ERROR", "ERROR"]
+    assert all("lacks capability DUTY_LEGS, which its board file" in r["reason"] for r in rows)
+    (tmp_path / "promise.yaml").write_text("name: bad\ncapabilities: [PWM]\n")
+    with pytest.raises(ConfigError) as info:
+        load_sweep(path)
+    assert info.value.source == str(tmp_path / "promise.yaml") and info.value.line == 2

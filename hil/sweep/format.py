@@ -10,6 +10,7 @@ top) never mistakes a sweep for a plan.
       name: sensorless-tolerances
       plans: [../04_sensorless_ekf.yaml]      # relative to this file
       link: stub                              # a link that can run many times at once
+      board: ../boards/my-board.yaml          # optional board file for every run (docs/boards.md)
       seed: 16
       sampling: latin_hypercube               # or monte_carlo
       runs: 64                                # samples per grid point
@@ -75,6 +76,7 @@ SWEEP_SCHEMA = obj({
         "description": {"type": "string"},
         "plans": {"type": "array", "minItems": 1, "items": NAME},
         "link": {"type": "string", "pattern": PARALLEL_LINK_PATTERN},
+        "board": NAME,
         "seed": {"type": "integer", "minimum": 0},
         "sampling": {"enum": list(SAMPLING)},
         "runs": POSITIVE_INT,
@@ -138,6 +140,7 @@ class Sweep:
     parameters: tuple[Parameter, ...]
     keep_failed_logs: bool = True
     keep_passing_logs: float = 0.1
+    board_path: Path | None = None  # `board:`, relative to the sweep file; None: each plan's own
     lines: dict[str, int] = field(default_factory=dict)
     link_line: int | None = None    # the line of `link:` (None: the default, stub)
 
@@ -261,12 +264,19 @@ def _build(doc: YamlDocument, path: Path) -> Sweep:
     for i, pp in enumerate(plan_paths):
         if not pp.is_file():
             raise doc.error(base + ("plans", i), f"plan file not found: {pp}")
+    board_path = None
+    if s.get("board") is not None:
+        board_path = (path.parent / s["board"]).resolve()
+        from hil.boards import load_board
+
+        load_board(board_path)              # a bad board file fails the sweep at load
     sampled = [p for p in params if not p.is_grid]
     if "runs" in s and not sampled:
         pass  # runs repeats each grid point (different seeds)
     sweep = Sweep(
         name=s["name"], description=str(s.get("description", "")).strip(), source_path=path,
-        plan_paths=plan_paths, link=s.get("link", "stub"), seed=int(s["seed"]),
+        plan_paths=plan_paths, link=s.get("link", "stub"), board_path=board_path,
+        seed=int(s["seed"]),
         sampling=s.get("sampling", "monte_carlo"), runs=int(s.get("runs", 1)),
         retries=int(s.get("retries", 2)), fixed=fixed, parameters=tuple(params),
         keep_failed_logs=bool((s.get("logs") or {}).get("failed", True)),

@@ -19,6 +19,7 @@ from hil.sweep.summary import summarize
 def tasks_for(sweep: Sweep, out: Path) -> list[dict]:
     return [{"index": r.index, "plan_path": str(r.plan_path), "point": r.point, "sample": r.sample,
              "seed": r.seed, "values": r.values, "fixed": dict(sweep.fixed), "link": sweep.link,
+             "board": None if sweep.board_path is None else str(sweep.board_path),
              "out_dir": str((out / "runs").resolve()), "keep_failed": sweep.keep_failed_logs,
              "keep_passing": keep_passing_log(sweep.seed, r.index, sweep.keep_passing_logs)}
             for r in expand(sweep)]

@@ -49,7 +49,7 @@ def run_one(task: dict) -> dict:
     # The session's warnings (board FAULTs) go to stderr; in a sweep the row carries them.
     with open(os.devnull, "w") as quiet, contextlib.redirect_stderr(quiet):
         result, _signals = run_plan(plan, link=task["link"], out_dir=run_dir, seed=task["seed"],
-                                    reports=False)
+                                    reports=False, board=task.get("board"))
     passed = result.outcome.passed
     log = result.log_path
     keep = (task["keep_failed"] if not passed else task["keep_passing"])
