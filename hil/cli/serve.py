@@ -28,10 +28,10 @@ def parse_host_port(text: str, default_host: str = "127.0.0.1") -> tuple[str, in
 
 def serve_command(args) -> int:
     from hil.ports.modbus import ControlMailbox, ModbusPort
-    from hil.session.control_inputs import ControlLimits
+    from hil.control_inputs import ControlLimits
 
     profile = load_bench_profile(args.profile)
-    # the one range check of every control input, from the profile (hil/session/control_inputs.py)
+    # the one range check of every control input, from the profile (hil/control_inputs.py)
     limits = ControlLimits.from_profile(profile)
     limits.speed_ref_rpm(args.speed_rpm, "--speed-rpm")
     config = SessionConfig(link=args.link, mode=args.mode, log_path=args.log,

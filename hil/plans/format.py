@@ -30,7 +30,7 @@ from hil.session.board_params import READ_ONLY_PARAMS, SETTABLE_PARAMS
 from configfile.schema import (BOOLEAN, FRACTION, NAME, NON_NEGATIVE, NUMBER, POSITIVE, POSITIVE_INT,
                                SchemaChecker, obj, python_type)
 from configfile.source import ConfigError, KeyPath, YamlDocument, format_key, load_yaml, parse_yaml
-from hil.session.control_inputs import UNBOUNDED, ControlInputError, ControlLimits
+from hil.control_inputs import UNBOUNDED, ControlInputError, ControlLimits
 from hil.faults.catalog import FAULTS, PLANT_PARAMS
 
 # Board parameters a plan may PARAM_SET: protocol/c/hil_proto.h's hil_param_id
@@ -551,7 +551,7 @@ def _step_inputs(step: "Step"):
 def check_control_inputs(steps: Iterable["Step"], limits: ControlLimits, source: str,
                          line_of: Callable[[KeyPath], int | None] | None = None) -> None:
     """Every command, load and DC-link value of the steps within `limits`
-    (hil.session.control_inputs, the validator of every control input); ConfigError naming
+    (hil.control_inputs, the validator of every control input); ConfigError naming
     the file, the line and the key of the first one outside."""
     for step in steps:
         for sub, value, check in _step_inputs(step):

@@ -34,7 +34,7 @@ from hil.plans.format import (
 from hil.logs.recorder import SENSOR_FIELDS, TELEMETRY_FIELDS, COMMAND_FIELDS
 from hil.reports.html import slug, write_reports, write_summary
 from hil.session.bench_session import BenchSession, SessionConfig, SessionError
-from hil.session.control_inputs import ControlLimits
+from hil.control_inputs import ControlLimits
 from hil.plans.signals import SignalSet
 from configfile.dataclass_methods import dataclass
 from configfile.source import ConfigError

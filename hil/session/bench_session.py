@@ -32,7 +32,7 @@ from protocol.messages import (
 from hil.links.registry import BoardConnection, connect
 from hil.logs.recorder import COMMAND_FIELDS, Recorder
 from hil.session.board_params import board_parameters
-from hil.session.control_inputs import ControlInputError, ControlLimits
+from hil.control_inputs import ControlInputError, ControlLimits
 from hil.session.cpu_latency import CpuLatencyHold
 from hil.session.errors import SessionError
 from hil.session.link_tap import LinkTap, tappable
@@ -403,7 +403,7 @@ class BenchSession:
 
     @property
     def control_limits(self) -> ControlLimits:
-        """The ranges of every control input (hil/session/control_inputs.py), from the profile."""
+        """The ranges of every control input (hil/control_inputs.py), from the profile."""
         limits = self.__dict__.get("_control_limits")
         if limits is None:
             limits = self._control_limits = ControlLimits.from_profile(self.profile)
