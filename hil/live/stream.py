@@ -38,7 +38,7 @@ from hil.control_inputs import UNBOUNDED, ControlInputError
 COMMAND_TOPIC = "/cmd"
 #: Rows (periods handed over by the recorder) given to the server at once; see the module doc.
 FLUSH_ROWS = 16
-#: /cmd key -> (type, the mailbox's request field); `pace` is the stream's own
+#: /cmd key -> the mailbox's request field (checked by hil.control_inputs); `pace` is the stream's own
 COMMAND_KEYS = {"speed_ref_rpm": "speed_ref_rpm", "enable": "run",
                 "load_torque_nm": "load_torque_nm", "fault_bits": "fault_bits", "pace": None}
 PACES = ("fast", "realtime")
