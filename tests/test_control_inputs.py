@@ -1,4 +1,4 @@
-"""One validator for every control input (hil/session/control_inputs.py, docs/plans.md
+"""One validator for every control input (hil/control_inputs.py, docs/plans.md
 "Control inputs"): the values that used to pass the checks and kill a run (1e308 rpm, a
 1e308 N m load, fault bits -1 and 2^64 + 4, bits no fault defines) are refused by name on
 every path (/cmd, Modbus, plan files, the Python API, the session's mailbox), counted, and
@@ -16,7 +16,7 @@ from hil.plans.format import parse_plan
 from hil.run.runner import Bench, run_plan
 from hil.session.bench_session import SessionError
 from hil.session.board_params import load_bench_profile
-from hil.session.control_inputs import ControlInputError, ControlLimits
+from hil.control_inputs import ControlInputError, ControlLimits
 
 PAPER = load_bench_profile()
 LIMITS = ControlLimits.from_profile(PAPER)

@@ -93,3 +93,66 @@ def test_cmd_sent_past_the_gate_to_the_sdk_port_is_not_applied(stream):
     _wait_for_command(stream, 1)
     assert stream.commands_taken == 0 and stream._mailbox.take_requests() is None
     assert "did not come through the gate" in stream.take_errors()[0]
+
+
+def test_hil_serve_refuses_the_values_that_killed_it_by_name_and_runs_on(tmp_path):
+    """`hil serve` died on {"speed_ref_rpm": 1e308} (float32 overflow) and on
+    {"load_torque_nm": 1e308} (a NaN plant); fault bits -1 injected every fault. Now each is
+    refused on the console with its range, the good command after them is applied, and the
+    run ends by its --duration with exit status 0."""
+    import os
+    import socket
+    import subprocess
+    import sys
+    import time
+    from pathlib import Path
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    token = "serve-test-token"
+    serve = subprocess.Popen([sys.executable, "-m", "hil.cli.main", "serve", "--link", "stub",
+                              "--enable", "--speed-rpm", "1000", "--modbus", "off",
+                              "--duration", "4", "--pace", "realtime", "--live", f"127.0.0.1:{port}",
+                              "--log", str(tmp_path / "serve.mcap")],
+                             cwd=Path(__file__).resolve().parents[1], stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, text=True,
+                             env={**os.environ, "HIL_LIVE_TOKEN": token})
+    try:
+        async def drive():
+            url = f"ws://127.0.0.1:{port}/?token={token}"
+            deadline = time.monotonic() + 20
+            while True:
+                try:
+                    ws = await websockets.connect(url, subprotocols=[SUBPROTOCOL], open_timeout=10)
+                    break
+                except OSError:
+                    assert time.monotonic() < deadline, "hil serve --live never listened"
+                    await asyncio.sleep(0.2)
+            async with ws:
+                await asyncio.wait_for(ws.recv(), 10)                     # serverInfo
+                await ws.send(json.dumps({"op": "advertise", "channels": [
+                    {"id": 1, "topic": "/cmd", "encoding": "json", "schemaName": "hil.cmd"}]}))
+                for command in ({"speed_ref_rpm": 1e308}, {"load_torque_nm": 1e308},
+                                {"fault_bits": -1}, {"fault_bits": 2**64 + 4},
+                                {"speed_ref_rpm": 1500}):
+                    await ws.send(b"\x01" + struct.pack("<I", 1) + json.dumps(command).encode())
+                await asyncio.sleep(0.5)
+        asyncio.run(asyncio.wait_for(drive(), 40))
+        out, err = serve.communicate(timeout=60)
+    finally:
+        if serve.poll() is None:
+            serve.kill()
+            serve.communicate()
+    assert serve.returncode == 0, err
+    assert "hil serve: live: /cmd: 'speed_ref_rpm': outside -6000 .. 6000 (2 x the motor's rated" in err
+    assert "hil serve: live: /cmd: 'load_torque_nm': outside -10.44 .. 10.44" in err
+    assert "hil serve: live: /cmd: 'fault_bits': fault bits are >= 0" in err
+    assert "hil serve: live: /cmd: 'fault_bits': bits 0x10000000000000000 name no fault" in err
+    assert err.count("hil serve: live:") == 4, err
+    assert "periods (4.000 s simulated)" in err
+    from hil.logs.reader import read_log
+
+    events = read_log(tmp_path / "serve.mcap")["/plan/events"]
+    speeds = [v for k, v in zip(events["kind"], events["speed_ref_rpm"]) if k == "command"]
+    assert speeds[-1] == 1500.0                  # the good command after the refused ones

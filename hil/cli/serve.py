@@ -28,7 +28,7 @@ def parse_host_port(text: str, default_host: str = "127.0.0.1") -> tuple[str, in
 
 def serve_command(args) -> int:
     from hil.ports.modbus import ControlMailbox, ModbusPort
-    from hil.session.control_inputs import ControlLimits
+    from hil.control_inputs import ControlLimits
 
     profile = load_bench_profile(args.profile)
     board = None
@@ -36,7 +36,7 @@ def serve_command(args) -> int:
         from hil.boards import load_board
 
         board = load_board(args.board)
-    # the one range check of every control input, from the profile (hil/session/control_inputs.py)
+    # the one range check of every control input, from the profile (hil/control_inputs.py)
     limits = ControlLimits.from_profile(profile)
     limits.speed_ref_rpm(args.speed_rpm, "--speed-rpm")
     config = SessionConfig(link=args.link, mode=args.mode, log_path=args.log,

@@ -422,7 +422,7 @@ def _parameter_drift(inj: FaultInjector, args) -> Callable[[], None]:
         # The load's time profile from now on (its speed-proportional part is not scaled).
         load = plant.load
         present = load.profile(plant.t_s)
-        # a load stimulus like any other: within the profile's range (hil/session/control_inputs.py)
+        # a load stimulus like any other: within the profile's range (hil/control_inputs.py)
         inj.session.control_limits.torque_nm(present * factor, "parameter_drift load_torque_nm")
         load.set_ramp(present * factor, ramp_s)
         return lambda: load.set_ramp(present, ramp_s)

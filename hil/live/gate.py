@@ -176,12 +176,14 @@ class LiveGate:
 
 @dataclass(frozen=True)
 class _GateConfig:
+    """The gate's settings, as its process reads them from stdin."""
+
     host: str
     port: int
     inner_port: int
     token: str
     origins: tuple[str, ...]
-    auth_frame: bytes = b""
+    auth_frame: bytes               # the masked advertisement of the secret topic
 
 
 def refusal(config: _GateConfig, method: str, target: str, headers: dict[str, str]) -> str | None:

@@ -33,12 +33,12 @@ from foxglove.websocket import Capability, ServerListener
 
 from hil.logs.mcap_writer import FIXED_TYPES, fixed_descriptor_set, tag_varint
 from hil.live.gate import FOXGLOVE_ORIGINS, LiveGate
-from hil.session.control_inputs import UNBOUNDED, ControlInputError
+from hil.control_inputs import UNBOUNDED, ControlInputError
 
 COMMAND_TOPIC = "/cmd"
 #: Rows (periods handed over by the recorder) given to the server at once; see the module doc.
 FLUSH_ROWS = 16
-#: /cmd key -> (type, the mailbox's request field); `pace` is the stream's own
+#: /cmd key -> the mailbox's request field (checked by hil.control_inputs); `pace` is the stream's own
 COMMAND_KEYS = {"speed_ref_rpm": "speed_ref_rpm", "enable": "run",
                 "load_torque_nm": "load_torque_nm", "fault_bits": "fault_bits", "pace": None}
 PACES = ("fast", "realtime")
@@ -139,7 +139,7 @@ class LiveStream:
         self.pace = pace
         self.commands_taken = 0              # /cmd messages accepted (tests count them)
         self.commands_refused = 0            # /cmd messages refused, whatever the reason
-        self._limits = UNBOUNDED             # hil.session.control_inputs: the ranges
+        self._limits = UNBOUNDED             # hil.control_inputs: the ranges
         self._lock = threading.Lock()
         self._context = foxglove.Context()
         # Lockstep runs as fast as it can: the viewer is told that simulated time is not wall time.

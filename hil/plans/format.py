@@ -32,7 +32,7 @@ from hil.boards.standard import STANDARD_PARAMS
 from configfile.schema import (BOOLEAN, FRACTION, NAME, NON_NEGATIVE, NUMBER, POSITIVE, POSITIVE_INT,
                                SchemaChecker, obj, python_type)
 from configfile.source import ConfigError, KeyPath, YamlDocument, format_key, load_yaml, parse_yaml
-from hil.session.control_inputs import UNBOUNDED, ControlInputError, ControlLimits
+from hil.control_inputs import UNBOUNDED, ControlInputError, ControlLimits
 from hil.faults.catalog import FAULTS, PLANT_PARAMS
 
 # SPEC 8's standard parameters a plan may PARAM_SET on any board that takes them. A board's
@@ -606,7 +606,7 @@ def _step_inputs(step: "Step"):
 def check_control_inputs(steps: Iterable["Step"], limits: ControlLimits, source: str,
                          line_of: Callable[[KeyPath], int | None] | None = None) -> None:
     """Every command, load and DC-link value of the steps within `limits`
-    (hil.session.control_inputs, the validator of every control input); ConfigError naming
+    (hil.control_inputs, the validator of every control input); ConfigError naming
     the file, the line and the key of the first one outside."""
     for step in steps:
         for sub, value, check in _step_inputs(step):

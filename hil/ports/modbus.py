@@ -35,7 +35,7 @@ from pymodbus.framer import FramerType
 from pymodbus.server import ModbusSerialServer, ModbusTcpServer
 from pymodbus.simulator import DataType, SimData, SimDevice
 
-from hil.session.control_inputs import UNBOUNDED, ControlInputError, ControlLimits
+from hil.control_inputs import UNBOUNDED, ControlInputError, ControlLimits
 
 REGISTER_MAP_VERSION = 2  # 2: speed_reference (holding 5-6)
 _TYPES = {"int16": (1, True), "uint16": (1, False), "int32": (2, True), "uint32": (2, False)}
@@ -407,7 +407,7 @@ class _PortServer:
         return None
 
     def _apply(self, changed: dict[str, float | int]) -> ExcCodes | None:
-        """Validate decoded writes (hil.session.control_inputs, the one validator of every
+        """Validate decoded writes (hil.control_inputs, the one validator of every
         control input) and post them to the mailbox; all or nothing."""
         limits = self.config.limits
         requests: dict[str, Any] = {}
@@ -479,7 +479,7 @@ class ModbusPort:
     asyncio loop; "process" runs it in a spawned process, so that handling a request
     never holds this process's GIL (in a thread each request stalls the session for
     about 0.1-0.6 ms: see docs/modbus.md). Writes outside ``limits`` (a
-    hil.session.control_inputs.ControlLimits, usually ``ControlLimits.from_profile``), or
+    hil.control_inputs.ControlLimits, usually ``ControlLimits.from_profile``), or
     outside ``load_torque_limit_nm`` (absolute), ``dc_link_voltage_limit_v``,
     ``fault_bits_mask`` or ``speed_ref_limit_rpm`` (absolute) where given, are refused with
     Modbus exception 3 (illegal data value) and counted (``mailbox.writes_refused``)."""

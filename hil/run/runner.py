@@ -38,7 +38,7 @@ from hil.session.bench_session import BenchSession, SessionConfig, SessionError
 from hil.links.registry import LinkUnavailable
 from hil.session.bench_session import _fault_text as fault_text    # SPEC 2.9's wording
 from hil.session.board_state import fault_name
-from hil.session.control_inputs import ControlLimits
+from hil.control_inputs import ControlLimits
 from hil.plans.signals import SignalSet
 from configfile.dataclass_methods import dataclass
 from configfile.source import ConfigError

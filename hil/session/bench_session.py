@@ -35,7 +35,7 @@ from hil.logs.recorder import COMMAND_FIELDS, Recorder
 from hil.session.adapter_check import check_adapter
 from hil.session.board_params import board_parameters, default_board
 from hil.session.board_state import BoardState
-from hil.session.control_inputs import ControlInputError, ControlLimits
+from hil.control_inputs import ControlInputError, ControlLimits
 from hil.session.cpu_latency import CpuLatencyHold
 from hil.session.errors import SessionError
 from hil.session.link_tap import LinkTap, tappable
@@ -447,17 +447,19 @@ class BenchSession:
         self.recorder.command(self.plant.period, self.command_state.row())
         self._event("command", dict(changes))
 
+    _control_limits: ControlLimits | None = None
+    inputs_refused = 0          # control inputs refused on their way in (counted per session)
+
     @property
     def control_limits(self) -> ControlLimits:
-        """The ranges of every control input (hil/session/control_inputs.py), from the profile."""
-        limits = self.__dict__.get("_control_limits")
-        if limits is None:
-            limits = self._control_limits = ControlLimits.from_profile(self.profile)
-        return limits
+        """The ranges of every control input (hil/control_inputs.py), from the profile."""
+        if self._control_limits is None:
+            self._control_limits = ControlLimits.from_profile(self.profile)
+        return self._control_limits
 
     def _refuse_input(self, source: str, exc: ControlInputError) -> None:
         """A control input refused on its way in: counted, named in an event; the run goes on."""
-        self.inputs_refused = getattr(self, "inputs_refused", 0) + 1
+        self.inputs_refused += 1
         self._event("input_refused", {"source": source, "input": exc.name, "value": repr(exc.value),
                                       "reason": exc.why})
 
