@@ -135,9 +135,41 @@ def render(bench: dict, json_name: str) -> str:
         med = "-" if median is None else f"{_fmt(median, aim.digits)} {aim.unit}"
         rng = "-" if spread is None else f"{_fmt(spread[0], aim.digits)} to {_fmt(spread[1], aim.digits)}"
         lines.append(f"| {aim.text} | {bound} | {med} | {rng} | **{verdict}** |")
+    lines += _reliability(bench.get("hostile_board"))
     lines += ["", "Every other figure of the run is in the JSON; `python -m bench NAME [--quick]`",
               "measures one bench module again.", ""]
     return "\n".join(lines)
+
+
+#: The hostile-board soak's figures, in the order the page shows them.
+_SOAK_ROWS = (("sessions", "sessions"), ("crashes", "crashes (an exception the bench does not name)"),
+              ("hangs", "hangs (a session past its own bound)"),
+              ("unnamed", "ends without a named cause"), ("logs_readable", "logs readable"),
+              ("not_safe", "plants not safe-stated at the end"))
+
+
+def _reliability(soak: Any) -> list[str]:
+    """The hostile-board soak (bench/hostile_board.py) as a table: lockstep and real time."""
+    lines = ["", "## Reliability: hostile boards", ""]
+    if not isinstance(soak, dict):
+        return lines + ["Not measured in this JSON (`python -m bench hostile_board`)."]
+    lines += ["Bench sessions against seeded boards that answer with random mixes of valid,",
+              "malformed, out-of-order and out-of-range frames (`python -m bench hostile_board`;",
+              "the bounded version runs in the test suite, `tests/test_hostile_board.py`).", "",
+              "| figure | lockstep | real time |", "|---|---|---|"]
+    realtime = soak.get("realtime") if isinstance(soak.get("realtime"), dict) else {}
+    for key, text in _SOAK_ROWS:
+        lines.append(f"| {text} | {_count(soak.get(key))} | {_count(realtime.get(key))} |")
+    ends = soak.get("ends_by_kind")
+    if isinstance(ends, dict) and ends:
+        listed = ", ".join(f"{kind} {n}" for kind, n in sorted(ends.items(), key=lambda kv: -kv[1]))
+        lines += ["", f"How the lockstep sessions ended: {listed}."]
+    return lines
+
+
+def _count(value: Any) -> str:
+    number = _number(value)
+    return "-" if number is None else f"{int(number):,}"
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -92,3 +92,15 @@ def test_no_spread_is_not_judged_and_errors_are_named():
     assert got[:2] == [HELD, HELD]
     assert got[2] == NOT_JUDGED
     assert got[3] == "not measured: hil not found"
+
+
+def test_the_hostile_board_soak_is_a_table_of_its_figures():
+    soak = {"sessions": 2000, "crashes": 0, "hangs": 0, "unnamed": 0, "logs_readable": 2000,
+            "not_safe": 0, "ends_by_kind": {"ok": 1500, "watchdog": 500},
+            "realtime": {"sessions": 200, "crashes": 1, "hangs": 0, "unnamed": 0,
+                         "logs_readable": 200, "not_safe": 0}}
+    page = render({"hostile_board": soak}, "x.json")
+    assert "| sessions | 2,000 | 200 |" in page
+    assert "| crashes (an exception the bench does not name) | 0 | 1 |" in page
+    assert "How the lockstep sessions ended: ok 1500, watchdog 500." in page
+    assert "Not measured in this JSON" in render({}, "x.json")
