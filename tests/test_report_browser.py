@@ -67,8 +67,9 @@ def test_plan_report_renders_with_its_plots_and_no_console_messages(reports, tmp
 
 
 def first_trace_alone(svg: str) -> str:
-    """The figure with only its first polyline (the others may cover it where they agree)."""
-    first = re.search(r'<polyline [^>]*/>', svg).group(0)
+    """The figure with only its first trace's polyline, in the colour cycle's first colour
+    (the others may cover it where they agree; the plant's traces are drawn last)."""
+    first = re.search(r'<polyline [^>]*stroke="#1f77b4"[^>]*/>', svg).group(0)
     return re.sub(r'<polyline [^>]*/>', "", svg).replace("</g>", first + "</g>", 1)
 
 

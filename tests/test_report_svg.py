@@ -123,3 +123,47 @@ def test_escape_is_html_escape(text):
     from hil.reports.svg import escape
 
     assert escape(text) == html.escape(text)
+
+
+def _axis_tick_texts(svg: str) -> tuple[list[str], list[str]]:
+    """The x and y tick labels of a one-axes figure: font-size 10 texts sharing a y (x ticks)
+    or an x (y ticks)."""
+    texts = re.findall(r'<text x="([\d.]+)" y="([\d.]+)" text-anchor="(\w+)" font-size="10">([^<]*)</text>', svg)
+    xs = [t for _, _, anchor, t in texts if anchor == "middle"]
+    ys = [t for _, _, anchor, t in texts if anchor == "end"]
+    return xs, ys
+
+
+@pytest.mark.parametrize("lo,hi", [(100000.0, 100050.0), (10.04, 10.0401), (-2.5e-4, -2.4999e-4),
+                                   (0.0, 1e-9), (3.0, 4.0)])
+def test_rendered_tick_labels_are_never_identical(lo, hi):
+    """A step far below the values' magnitude (1e5 .. 1e5 + 50 read '1e5' on every tick)."""
+    fig = Figure()
+    ax = fig.axes[0]
+    ax.plot(np.linspace(lo, hi, 50), np.linspace(lo, hi, 50))
+    xs, ys = _axis_tick_texts(fig.svg())
+    assert len(xs) >= 2 and len(ys) >= 2
+    assert len(set(xs)) == len(xs) and len(set(ys)) == len(ys), (xs, ys)
+
+
+def test_tick_labels_are_distinct_for_any_range():
+    from hil.reports.svg import tick_labels
+
+    rng = np.random.default_rng(7)
+    for _ in range(500):
+        centre = 10.0 ** rng.uniform(-8, 9) * rng.choice([-1, 1])
+        width = abs(centre) * 10.0 ** rng.uniform(-9, 0.5)
+        ticks = nice_ticks(centre - width, centre + width, int(rng.integers(2, 9)))
+        texts = tick_labels(ticks)
+        assert len(set(texts)) == len(texts), (ticks, texts)
+
+
+def test_a_higher_zorder_line_is_drawn_later_and_the_legend_keeps_call_order():
+    fig = Figure()
+    ax = fig.axes[0]
+    ax.plot([0, 1], [0, 1], label="truth", color="#000001", zorder=3)
+    ax.plot([0, 1], [0, 1], label="estimate", color="#000002")
+    ax.legend()
+    svg = fig.svg()
+    assert re.findall(r'<polyline [^>]*stroke="(#\w+)"', svg) == ["#000002", "#000001"]
+    assert re.findall(r'font-size="9">([^<]*)<', svg) == ["truth", "estimate"]

@@ -588,7 +588,8 @@ def _m_ripple(ctx: CheckContext) -> Measurement:
     s = ctx.main
     v = ripple(s.t_s, s.values, ctx.arg("measure"), ctx.arg("detrend"))
     return Measurement(v, s.unit, details={"mean": float(np.mean(s.values)), "min": float(np.min(s.values)),
-                                           "max": float(np.max(s.values))})
+                                           "max": float(np.max(s.values)),
+                                           "measure": ctx.arg("measure"), "detrend": ctx.arg("detrend")})
 
 
 def _m_thd(ctx: CheckContext) -> Measurement:
@@ -603,6 +604,7 @@ def _m_circularity(ctx: CheckContext) -> Measurement:
     a, b = ctx.sig["alpha"], ctx.sig["beta"].to_unit(ctx.sig["alpha"].unit)
     v, details = circularity_percent(a.values, b.resampled(a.t_s), ctx.arg("centre"), ctx.arg("measure"))
     details["signal_unit"] = a.unit
+    details["measure"] = ctx.arg("measure")
     return Measurement(v, "%", f"mean radius {details['r_mean']:.4g} {a.unit}, "
                        f"{details['r_min']:.4g} .. {details['r_max']:.4g}", details)
 

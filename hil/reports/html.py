@@ -8,9 +8,11 @@
   testcase carrying the reason. Valid against the Jenkins junit-10.xsd
   (tests/data/junit-10.xsd).
 - ``report.html``: one file with inline CSS and SVG plots as base64 data
-  URIs (hil/reports/svg.py, drawn in milliseconds): the plan, its verdicts,
-  measured values against limits, a plot of each check's window with its
-  limits drawn, and the figures the plan's ``plots:`` section asks for.
+  URIs (hil/reports/svg.py, drawn in milliseconds): the outcome and its cause,
+  the verdicts (measured values against limits), the plan's description
+  folded below them, the figures the plan's ``plots:`` section asks for, and
+  a plot of each check's window (limit lines where the check bounds the
+  plotted signal, the named statistic where it bounds a statistic).
 - ``result.json``: PlanResult.to_json(), plain data for other tools.
 
 `write_summary` writes the multi-plan index.html and a combined junit.xml.
@@ -200,6 +202,83 @@ def _hline_limits(ax, limits: Limits | None, unit: str) -> None:
                        label="marginal")
 
 
+#: Unit suffixes of signal names (plant.speed_rpm, ctrl.speed_feedback_rad_s), longest first.
+_NAME_UNITS = (("_rad_s", "rad/s"), ("_deg_s", "deg/s"), ("_mwb", "mWb"), ("_rpm", "rpm"),
+               ("_nm", "Nm"), ("_wb", "Wb"), ("_deg", "deg"), ("_rad", "rad"), ("_hz", "Hz"))
+
+
+def _name_suffix(name: str) -> tuple[str, str] | None:
+    """(suffix, unit) of a signal name that ends in a unit, else None."""
+    lower = name.lower()
+    return next(((suffix, u) for suffix, u in _NAME_UNITS if lower.endswith(suffix)), None)
+
+
+def name_unit(name: str) -> str | None:
+    """The unit a signal's name says it is in (its suffix), or None."""
+    found = _name_suffix(name)
+    return found[1] if found else None
+
+
+def legend_name(name: str, unit: str) -> str:
+    """A trace's legend entry on an axis in `unit`: the name when its suffix already says
+    that unit, else the name without a suffix that says another unit, with the unit drawn
+    (ctrl.speed_feedback_rad_s converted to rpm is "ctrl.speed_feedback (rpm)")."""
+    found = _name_suffix(name)
+    if found is not None and found[1] == unit:
+        return name
+    if found is not None:
+        name = name[: -len(found[0])]
+    return name if unit == "1" else f"{name} ({unit})"
+
+
+def _zorder(name: str) -> float:
+    """The plant's signals (the truth) are drawn above the board's estimates and references."""
+    return 3.0 if name.startswith("plant.") else 2.0
+
+
+def _value_text(value: float, unit: str) -> str:
+    return f"{value:.4g}" + ("" if unit == "1" else f" {unit}")
+
+
+def _statistic_marks(ax, d: Mapping, signal_unit: str, unit: str) -> None:
+    """A statistic's value where it reads on the trace, named: the mean as a line, the RMS
+    and max |x| as lines at +- the value; the others (std, peak-to-peak) are not drawn. The
+    limits bound the statistic, not the trace: they are in the verdict table, not drawn."""
+    name = d.get("statistic")
+    value = d.get("measured_native")
+    if value is None or not math.isfinite(value) or not compatible(d.get("native_unit", signal_unit), unit):
+        return
+    v = float(convert(value, d.get("native_unit", signal_unit), unit))
+    if name == "mean":
+        ax.axhline(v, color="#57606a", lw=1.0, ls="--", label=f"mean = {_value_text(v, unit)}")
+    elif name == "rms":
+        ax.axhline(v, color="#57606a", lw=1.0, ls="--", label=f"\u00b1RMS = {_value_text(v, unit)}")
+        ax.axhline(-v, color="#57606a", lw=1.0, ls="--")
+    elif name == "max_abs":
+        ax.axhline(v, color="#57606a", lw=1.0, ls="--", label=f"\u00b1max |x| = {_value_text(v, unit)}")
+        ax.axhline(-v, color="#57606a", lw=1.0, ls="--")
+
+
+def _ripple_marks(ax, d: Mapping, signal_unit: str, unit: str) -> None:
+    """A ripple check's measured value on the trace: peak-to-peak as the band from the
+    window's minimum to its maximum (what it measures with the mean removed), RMS as the
+    band mean +- RMS; named with the measure. The limit is on the measure, in the table."""
+    if not compatible(signal_unit, unit):
+        return
+    value = d.get("measured_native")
+    if value is None or not math.isfinite(value):
+        return
+    v = float(convert(value, d.get("native_unit", signal_unit), unit))
+    mean = float(convert(d["mean"], signal_unit, unit))
+    if d.get("measure") == "rms":
+        ax.axhspan(mean - v, mean + v, color="#8250df", alpha=0.12,
+                   label=f"mean \u00b1 RMS ripple ({_value_text(v, unit)})")
+    elif d.get("measure", "peak_to_peak") == "peak_to_peak" and d.get("detrend", "mean") == "mean":
+        lo, hi = (float(convert(d[k], signal_unit, unit)) for k in ("min", "max"))
+        ax.axhspan(lo, hi, color="#8250df", alpha=0.12,
+                   label=f"peak-to-peak = {_value_text(v, unit)}")
+
+
 def _plot_window(c: CheckResult) -> tuple[float, float]:
     """The check's window with 10 % of context either side."""
     t0, t1 = c.window
@@ -224,12 +303,15 @@ def check_figure(c: CheckResult, signals: SignalSet) -> str | None:
             continue
         w = s.window(a, b).to_unit(unit)
         t, y = _decimate(w.t_s, w.values)
-        ax.plot(t, y, lw=0.8, label=name)
+        ax.plot(t, y, lw=0.8, label=legend_name(name, unit), zorder=_zorder(name))
     ax.axvspan(c.window[0], c.window[1], color="#0969da", alpha=0.06, label="window")
     d = c.details
     t0 = c.window[0]
-    if c.kind in ("final_value", "bound", "statistic"):
+    if c.kind in ("final_value", "bound") or (c.kind == "statistic"
+                                              and d.get("statistic") in ("min", "max")):
         _hline_limits(ax, c.limits, unit)
+    elif c.kind == "statistic":
+        _statistic_marks(ax, d, main.unit, unit)
     elif c.kind in ("settling_time", "rise_time", "overshoot") and "target" in d:
         su = d.get("signal_unit", unit)
         target = float(convert(d["target"], su, unit))
@@ -256,11 +338,8 @@ def check_figure(c: CheckResult, signals: SignalSet) -> str | None:
     elif c.kind == "envelope" and "_tube" in d:
         tt, lo, hi = d["_tube"]
         ax.fill_between(tt, lo, hi, color="#1a7f37", alpha=0.15, step="mid", label="envelope")
-    elif c.kind == "ripple" and c.limits is not None and "mean" in d and compatible(c.limits.unit, unit):
-        mean = float(convert(d["mean"], main.unit, unit))
-        if c.limits.high is not None:
-            half = convert(c.limits.high, c.limits.unit, unit) / 2.0
-            ax.axhspan(mean - half, mean + half, color="#cf222e", alpha=0.08, label="limit (p-p)")
+    elif c.kind == "ripple" and "mean" in d:
+        _ripple_marks(ax, d, main.unit, unit)
     ax.set_xlabel("t (s)")
     ax.set_ylabel(unit)
     ax.grid(True, lw=0.3)
@@ -291,11 +370,14 @@ def _locus_check_figure(c: CheckResult, signals: SignalSet) -> str:
         r = d["r_mean"]
         ax.plot(cx + r * np.cos(th), cy + r * np.sin(th), color="#57606a", ls=":", lw=0.8,
                 label="mean circle")
-        if c.limits is not None and c.limits.high is not None and compatible(c.limits.unit, "%"):
-            half = r * convert(c.limits.high, c.limits.unit, "1") / 2.0
-            for rr in (r - half, r + half):
-                ax.plot(cx + rr * np.cos(th), cy + rr * np.sin(th), color="#cf222e", lw=0.8,
-                        label="limit")
+        if (d.get("measure", "peak_to_peak") == "peak_to_peak" and "r_min" in d and "r_max" in d
+                and c.measured is not None and math.isfinite(c.measured)):
+            # the check bounds the spread (max - min radius) / mean radius, not the radius:
+            # the measured extremes are drawn, named with the spread; the limit is in the table
+            spread = _value_text(c.measured, c.unit)
+            for rr in (d["r_min"], d["r_max"]):
+                ax.plot(cx + rr * np.cos(th), cy + rr * np.sin(th), color="#8250df", lw=0.8,
+                        ls="--", label=f"min / max radius (spread {spread})")
     ax.set_aspect("equal")
     ax.set_xlabel(f"{x.name} ({x.unit})")
     ax.set_ylabel(f"{y.name} ({y.unit})")
@@ -338,7 +420,7 @@ def plan_figure(spec, signals: SignalSet, marks: Mapping[str, float], end_s: flo
                 s = s.to_unit("deg")
             units.add(s.unit)
             t, y = _decimate(s.t_s, s.values)
-            ax.plot(t, y, lw=0.8, label=name)
+            ax.plot(t, y, lw=0.8, label=legend_name(name, s.unit), zorder=_zorder(name))
         for mark, t_mark in marks.items():
             if a <= t_mark <= b and mark != "start":
                 ax.axvline(t_mark, color="#57606a", lw=0.6, ls=":")
@@ -431,8 +513,6 @@ def html_report(result: PlanResult, signals: SignalSet, plots: Sequence = ()) ->
             ("checks", ", ".join(f"{n} {k}" for k, n in counts.items() if n))]
     parts.append('<table class="meta">' + "".join(f"<tr><td>{e(k)}</td><td>{e(str(v))}</td></tr>"
                                                   for k, v in meta) + "</table>")
-    if result.description:
-        parts.append(f"<h2>Description</h2><pre>{e(result.description)}</pre>")
     constants = result.extra.get("constants") or {}
     if constants:
         parts.append("<h2>Constants</h2><table><tr><th>name</th><th>value</th><th>formula and inputs</th></tr>"
@@ -457,6 +537,10 @@ def html_report(result: PlanResult, signals: SignalSet, plots: Sequence = ()) ->
                          f"<td>{_badge(c.outcome.value)}</td><td>{e(c.message)}</td>"
                          + (f"<td>{e(c.note)}</td>" if role != "acceptance" else "") + "</tr>")
         parts.append("</table>")
+    if result.description:
+        # the plan's derivation of its limits: long, and read after the verdicts, on demand
+        parts.append(f'<details class="description"><summary>Plan description (how its limits '
+                     f'were derived)</summary><pre>{e(result.description)}</pre></details>')
 
     if plots:
         parts.append("<h2>Figures</h2>")

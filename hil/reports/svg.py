@@ -60,8 +60,22 @@ def tick_label(value: float, step: float) -> str:
     magnitude = max(abs(value), abs(step))
     if magnitude >= 1e5 or magnitude < 1e-3:
         return f"{value:.3g}".replace("e-0", "e-").replace("e+0", "e")
-    decimals = next(d for d in range(13) if abs(round(step, d) - step) <= 1e-9 * abs(step))
+    # 1e-6: a step taken as the difference of two large ticks carries their rounding
+    decimals = next((d for d in range(13) if abs(round(step, d) - step) <= 1e-6 * abs(step)), 12)
     return f"{value:.{decimals}f}"
+
+
+def tick_labels(ticks: Sequence[float]) -> list[str]:
+    """The texts of evenly spaced ticks: tick_label's, with decimals added until no two are
+    equal (a step far below the values' magnitude, 10.0400 .. 10.0401, needs more than the
+    .3g the large or tiny magnitudes get)."""
+    step = ticks[1] - ticks[0] if len(ticks) > 1 else 1.0
+    texts = [tick_label(t, step) for t in ticks]
+    digits = 4
+    while len(set(texts)) < len(texts) and digits <= 17:
+        texts = ["0" if t == 0.0 else f"{t:.{digits}g}" for t in ticks]
+        digits += 1
+    return texts
 
 
 def _points(px: np.ndarray, py: np.ndarray) -> list[str]:
@@ -84,6 +98,7 @@ class Axes:
         self.box = (left, top, width, height)
         self.index = index                 # names its clip path within the figure
         self._items: list[tuple] = []      # (kind, data..., style)
+        self._zorder: dict[int, float] = {}  # item index -> zorder, where not 2
         self._x: list[np.ndarray] = []     # data extents for autoscaling
         self._y: list[np.ndarray] = []
         self._legend: dict[str, tuple[str, str, float]] = {}
@@ -107,10 +122,13 @@ class Axes:
             self._legend.setdefault(label, (color, ls, alpha))
 
     def plot(self, x, y, lw: float = 1.0, label: str | None = None, color: str | None = None,
-             ls: str = "-") -> None:
+             ls: str = "-", zorder: float = 2.0) -> None:
+        """A line; a higher `zorder` is drawn later, above the others (matplotlib's zorder:
+        everything else is at 2), while the legend keeps the order of the calls."""
         x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
         color = self._next_color(color)
         self._items.append(("line", x, y, color, lw, ls))
+        self._zorder[len(self._items) - 1] = zorder
         self._x.append(x)
         self._y.append(y)
         self._label(label, color, ls)
@@ -241,7 +259,8 @@ class Axes:
             out.append(f'<path d="{" ".join(grid)}" stroke="#d0d7de" stroke-width="0.5" fill="none"/>')
         body = []
         drawn: list[tuple[np.ndarray, np.ndarray]] = []    # line pixels, to place the legend
-        for item in self._items:
+        order = sorted(range(len(self._items)), key=lambda i: self._zorder.get(i, 2.0))
+        for item in (self._items[i] for i in order):
             kind = item[0]
             if kind == "line":
                 _, x, y, color, lw, ls = item
@@ -293,16 +312,14 @@ class Axes:
         out.append(f'<g {clip}>{"".join(body)}</g>')
         out.append(f'<rect x="{left:.1f}" y="{top:.1f}" width="{w:.1f}" height="{h:.1f}" '
                    f'fill="none" stroke="#57606a" stroke-width="0.8"/>')
-        step = xticks[1] - xticks[0] if len(xticks) > 1 else 1.0
-        for t in xticks:
+        for t, text in zip(xticks, tick_labels(xticks)):
             px = float(xpix(t))
             out.append(f'<path d="M{px:.1f} {top + h:.1f}v4" stroke="#57606a"/><text x="{px:.1f}" '
                        f'y="{top + h + 15:.1f}" text-anchor="middle" font-size="10">'
-                       f'{tick_label(t, step)}</text>')
-        step = yticks[1] - yticks[0] if len(yticks) > 1 else 1.0
-        for t in yticks:
+                       f'{text}</text>')
+        ylabels = [f"{t:g}" for t in yticks] if self.log_y else tick_labels(yticks)
+        for t, text in zip(yticks, ylabels):
             py = float(ypix(t))
-            text = f"{t:g}" if self.log_y else tick_label(t, step)
             out.append(f'<path d="M{left:.1f} {py:.1f}h-4" stroke="#57606a"/><text x="{left - 6:.1f}" '
                        f'y="{py + 3.5:.1f}" text-anchor="end" font-size="10">{text}</text>')
         if self.xlabel:
@@ -388,4 +405,5 @@ def polyline_points(svg: str) -> list[list[tuple[float, float]]]:
             for pts in re.findall(r'<polyline points="([^"]*)"', svg)]
 
 
-__all__: Sequence[str] = ("Axes", "Figure", "nice_ticks", "tick_label", "polyline_points")
+__all__: Sequence[str] = ("Axes", "Figure", "nice_ticks", "tick_label", "tick_labels",
+                          "polyline_points")

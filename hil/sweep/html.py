@@ -17,6 +17,34 @@ def _num(x) -> str:
     return "-" if x is None else f"{x:.4g}"
 
 
+def _unit_suffix(unit: str) -> str:
+    """' A' after a number; nothing for a dimensionless value (unit "1")."""
+    return "" if unit in ("1", "") else f" {unit}"
+
+
+def range_labels(lo: float, hi: float) -> tuple[str, str]:
+    """The texts of an axis' two ends, with the decimals the range needs (10.0400 and
+    10.0412, not 10.04 twice); more if they would still read the same."""
+    decimals = 0 if hi <= lo else max(0, 1 - math.floor(math.log10(hi - lo)))
+    while True:
+        a, b = f"{lo:.{decimals}f}", f"{hi:.{decimals}f}"
+        if a != b or hi <= lo or decimals >= 15:
+            return a, b
+        decimals += 1
+
+
+def spread_texts(lo, mid, hi) -> str:
+    """'min / median / max': .4g, or the decimals their range needs when .4g would print
+    different values the same (10.04 / 10.04 / 10.04)."""
+    if lo is None or mid is None or hi is None:
+        return f"{_num(lo)} / {_num(mid)} / {_num(hi)}"
+    if hi <= lo or f"{lo:.4g}" != f"{hi:.4g}" or not (math.isfinite(lo) and math.isfinite(hi)):
+        return f"{lo:.4g} / {mid:.4g} / {hi:.4g}"
+    a, b = range_labels(lo, hi)
+    decimals = len(a.partition(".")[2])
+    return f"{a} / {mid:.{decimals}f} / {b}"
+
+
 def _scatter(rows: list[dict], plan: str, check: str, param: str, unit: str) -> str:
     pts = []
     for r in rows:
@@ -38,18 +66,21 @@ def _scatter(rows: list[dict], plan: str, check: str, param: str, unit: str) -> 
     sy = lambda v: h - m + (v - y0) / (y1 - y0) * (-(h - 1.5 * m))
     dots = "".join(
         f'<circle cx="{sx(x):.1f}" cy="{sy(y):.1f}" r="3" fill="{"#2a7" if ok else "#d33"}">'
-        f"<title>run {i}: {html.escape(param)} = {x:.5g}, {y:.5g} {html.escape(unit)}</title></circle>"
+        f"<title>run {i}: {html.escape(param)} = {x:.5g}, {y:.5g}{html.escape(_unit_suffix(unit))}</title></circle>"
         for x, y, ok, i in pts)
+    x0_text, x1_text = range_labels(x0, x1)
+    y0_text, y1_text = range_labels(y0, y1)
+    title = html.escape(check) + ("" if unit in ("1", "") else f" [{html.escape(unit)}]")
     return (f'<svg width="{w}" height="{h}" xmlns="http://www.w3.org/2000/svg" '
             f'style="background:#fafafa;border:1px solid #ddd">'
             f'<line x1="{m}" y1="{h - m}" x2="{w - m / 2}" y2="{h - m}" stroke="#888"/>'
             f'<line x1="{m}" y1="{m / 2}" x2="{m}" y2="{h - m}" stroke="#888"/>'
-            f'<text x="{m}" y="{h - m + 14}" font-size="10">{x0:.4g}</text>'
-            f'<text x="{w - m / 2}" y="{h - m + 14}" font-size="10" text-anchor="end">{x1:.4g}</text>'
+            f'<text x="{m}" y="{h - m + 14}" font-size="10">{x0_text}</text>'
+            f'<text x="{w - m / 2}" y="{h - m + 14}" font-size="10" text-anchor="end">{x1_text}</text>'
             f'<text x="{w / 2}" y="{h - 8}" font-size="11" text-anchor="middle">{html.escape(param)}</text>'
-            f'<text x="4" y="{h - m}" font-size="10">{y0:.4g}</text>'
-            f'<text x="4" y="{m / 2 + 8}" font-size="10">{y1:.4g}</text>'
-            f'<text x="{m + 4}" y="{m / 2 - 4}" font-size="11">{html.escape(check)} [{html.escape(unit)}]</text>'
+            f'<text x="4" y="{h - m}" font-size="10" class="ytick">{y0_text}</text>'
+            f'<text x="4" y="{m / 2 + 8}" font-size="10" class="ytick">{y1_text}</text>'
+            f'<text x="{m + 4}" y="{m / 2 - 4}" font-size="11">{title}</text>'
             f"{dots}</svg>")
 
 
@@ -83,7 +114,7 @@ def write_html(sweep_info: dict, summary: dict, rows: list[dict], out: Path) -> 
             interval = f"{_pct(c['ci_low'])} - {_pct(c['ci_high'])}"
         parts.append(f"<tr{cls}><td>{e(str(c['plan']))}</td><td>{e(c['check'])}</td><td>{counted}</td>"
                      f"<td>{share}</td><td>{interval}</td>"
-                     f"<td>{_num(c['min'])} / {_num(c['median'])} / {_num(c['max'])} {e(c['unit'])}</td>"
+                     f"<td>{spread_texts(c['min'], c['median'], c['max'])}{e(_unit_suffix(c['unit']))}</td>"
                      f"<td>{drv}</td><td>{fr}</td></tr>")
     parts.append("</table><h2>Worst checks against their strongest parameter</h2>"
                  "<p>green: the check passed in that run; red: it failed.</p>")
@@ -114,7 +145,7 @@ def write_junit(sweep_info: dict, summary: dict, out: Path) -> Path:
                     f"{_pct(c['ci_low'])} - {_pct(c['ci_high'])})")
             if c.get("finding"):
                 text = (f"finding, measured in {c['measured_runs']} run(s): min / median / max "
-                        f"{_num(c['min'])} / {_num(c['median'])} / {_num(c['max'])} {c['unit']}")
+                        f"{_num(c['min'])} / {_num(c['median'])} / {_num(c['max'])}{_unit_suffix(c['unit'])}")
             if c["failed"]:
                 ET.SubElement(case, "failure", message=text).text = (
                     f"{text}; failed runs: {', '.join(map(str, c['failed_runs']))}")
