@@ -157,6 +157,14 @@ def _field(data: LogData, topic: str, name: str, spec: str) -> np.ndarray:
 def log_plot(path: str | Path, signals: list[str], out_png: str | Path,
              t0: float | None = None, t1: float | None = None) -> dict[str, Any]:
     """One stacked subplot per signal over [t0, t1] s, written to `out_png`."""
+    series, data = plot_series(path, signals, t0, t1)
+    return _draw(path, series, data, out_png)
+
+
+def plot_series(path: str | Path, signals: list[str], t0: float | None = None,
+                t1: float | None = None) -> tuple[list[tuple], LogData]:
+    """What `log_plot` draws: (spec, topic, field, t_s, float64 values) per signal, and the
+    data read; a signal that does not resolve to numbers raises LogCommandError."""
     if not signals:
         raise LogCommandError("no signal to plot: name at least one (e.g. plant.speed_rpm)")
     parsed = [(spec, *parse_signal(spec)) for spec in signals]
@@ -171,7 +179,10 @@ def log_plot(path: str | Path, signals: list[str], out_png: str | Path,
     if all(len(s[3]) == 0 for s in series):
         window = f" in the window {t0 if t0 is not None else 'start'} .. {t1 if t1 is not None else 'end'} s"
         raise LogCommandError(f"{path}: no samples of {', '.join(signals)}{window}")
+    return series, data
 
+
+def _draw(path: str | Path, series: list[tuple], data: LogData, out_png: str | Path) -> dict[str, Any]:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
