@@ -134,8 +134,10 @@ def test_log_info_lists_each_field_with_its_unit_and_plan_name(run, capsys):
     assert as_json["channels"] == json.loads(json.dumps(info["channels"], default=str))
     assert main(["log", "info", str(log)]) == 0
     text = capsys.readouterr().out
-    assert "/plant/truth:speed_rpm  [rpm]  plant.speed_rpm" in text
-    assert "/cmd:speed_ref_rpm  [rpm]  cmd.speed_ref_rpm" in text
+    for name in SIGNALS:       # one line per field: topic:field [unit] plan name
+        topic, field = log_source(name)
+        assert re.search(rf"^  {re.escape(topic)}:{field} +\[{re.escape(named[name][1])}\] +"
+                         rf"{re.escape(name)}$", text, re.M), name
 
 
 def test_plot_and_export_take_every_listed_name_with_its_unit(run, tmp_path):

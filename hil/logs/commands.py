@@ -101,10 +101,11 @@ def format_info(info: dict[str, Any]) -> str:
     for r in rows:
         lines.append("  " + "  ".join(c.ljust(w) if i < 3 else c.rjust(w) for i, (c, w) in enumerate(zip(r, widths))))
     lines.append("fields (topic:field, unit, the name plans use):")
-    for ch in info["channels"]:
-        for f in ch["fields"]:
-            lines.append(f"  {ch['topic']}:{f['field']}  [{f['unit'] or '-'}]"
-                         + (f"  {f['signal']}" if f["signal"] else ""))
+    fields = [(f"{ch['topic']}:{f['field']}", f"[{f['unit'] or '-'}]", f["signal"] or "")
+              for ch in info["channels"] for f in ch["fields"]]
+    w0 = max((len(r[0]) for r in fields), default=0)
+    w1 = max((len(r[1]) for r in fields), default=0)
+    lines += [f"  {a.ljust(w0)}  {b.ljust(w1)}  {c}".rstrip() for a, b, c in fields]
     if info["metadata"]:
         lines.append("metadata:")
         for name, data in info["metadata"].items():

@@ -43,7 +43,7 @@ STEP_SIGNALS = ("ctrl.fault_code", "fault.active_bits", "board.state", "board.re
 
 #: Where a run log keeps each group of signals: plan name ``group.field`` -> that topic's
 #: ``field``. A step signal ``board.state`` is the ``value`` of topic /step/board.state,
-#: written at each change. `log_source` and `plan_name` are the one mapping between the two.
+#: written at the first logged period, then at each change. `log_source` and `plan_name` are the one mapping between the two.
 LOG_TOPICS = {"plant": "/plant/truth", "sensor": "/plant/sensors", "ctrl": "/ctrl/telemetry",
               "cmd": "/cmd"}
 STEP_TOPIC_PREFIX = "/step/"
@@ -159,6 +159,7 @@ class Recorder:
         # step signals in the log: rows of step_rows written (or passed), and the value held
         self._step_logged: dict[str, int] = {}
         self._step_held: dict[str, float] = {}
+        self._last_logged_period: int | None = None
         self._log = None
         self._truth_ch = self._sensor_ch = self._telemetry_ch = None
         self._frames_ch = None
@@ -250,6 +251,10 @@ class Recorder:
                 self._truth_ch.write_many(t_ns, truth)
                 self._sensor_ch.write_many(t_ns, sensors)
                 self._log_steps(int(periods[0]), int(periods[-1]))
+                self._last_logged_period = int(periods[-1])
+        elif log is not None and self._last_logged_period is not None:
+            # a change that came after the last period's rows (a STATUS at the run's end)
+            self._log_steps(self._last_logged_period, self._last_logged_period)
         if m:
             rows = self._telemetry_stage[:m].copy()
             self._telemetry_blocks.append(rows)
