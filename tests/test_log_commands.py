@@ -51,7 +51,10 @@ def test_parse_signal_forms():
     assert parse_signal("sensor.adc_i1") == ("/plant/sensors", "adc_i1")
     assert parse_signal("ctrl.torque_est_nm") == ("/ctrl/telemetry", "torque_est_nm")
     assert parse_signal("/link/counters:crc.errors") == ("/link/counters", "crc.errors")
-    for bad in ("speed_rpm", "cmd.speed_ref_rpm", "plant.", "/plant/truth:", "plant/truth:x"):
+    # every name plans use, commands and step signals too (test_signal_vocabulary walks them all)
+    assert parse_signal("cmd.speed_ref_rpm") == ("/cmd", "speed_ref_rpm")
+    assert parse_signal("board.state") == ("/step/board.state", "value")
+    for bad in ("speed_rpm", "plant.", "/plant/truth:", "plant/truth:x"):
         with pytest.raises(LogCommandError, match="TOPIC:FIELD"):
             parse_signal(bad)
 
@@ -95,7 +98,7 @@ def test_plot_writes_a_png_of_the_chosen_window(run_log, tmp_path):
     assert speed["min"] == pytest.approx(RAMP_RPM_PER_S * 0.05) and speed["max"] == pytest.approx(RAMP_RPM_PER_S * 0.1)
     assert out["signals"]["ctrl.torque_est_nm"]["samples"] == 501
     assert out["signals"]["/plant/sensors:adc_i1"] == {"topic": "/plant/sensors", "field": "adc_i1",
-                                                       "samples": 1001, "min": 2048.0, "max": 2054.0}
+                                                       "unit": "count", "samples": 1001, "min": 2048.0, "max": 2054.0}
 
 
 def test_plot_errors_say_what_is_wrong(run_log, tmp_path):

@@ -1,8 +1,9 @@
 """`hil log info|plot|export`: what is in a run log, a PNG of chosen signals, CSV of chosen channels.
 
-A *signal* names one field of one topic: ``/plant/truth:speed_rpm`` or, for the three
-full-rate channels, the SignalSet-style short form ``plant.speed_rpm`` (``plant.`` ->
-/plant/truth, ``sensor.`` -> /plant/sensors, ``ctrl.`` -> /ctrl/telemetry). Time
+A *signal* names one field of one topic: ``/plant/truth:speed_rpm``, or the name a plan
+uses (``plant.speed_rpm``, ``cmd.speed_ref_rpm``, ``board.state``: test_plans/README.md,
+Signals), resolved by the recorder's own mapping (hil/logs/recorder.py log_source) and given
+the unit the plan runner gives it (hil/plans/signals.py SignalSet.from_arrays). Time
 windows are seconds from the log's first message. Unfinished (killed) logs are read up
 to their last finished chunk, and the commands say so.
 """
@@ -17,8 +18,9 @@ from typing import Any
 import numpy as np
 
 from hil.logs.reader import LogData, TopicData, log_summary, read_log
+from hil.logs.recorder import LOG_TOPICS, STEP_FIELD, is_held, log_source, plan_name, unit_of
+from hil.plans.signals import SIGNAL_CATALOG, SignalSet
 
-SIGNAL_PREFIXES = {"plant": "/plant/truth", "sensor": "/plant/sensors", "ctrl": "/ctrl/telemetry"}
 _PLOT_POINTS = 4000  # per signal; longer series are reduced to a min/max envelope
 
 
@@ -27,26 +29,53 @@ class LogCommandError(ValueError):
 
 
 def parse_signal(spec: str) -> tuple[str, str]:
-    """``topic:field`` or ``plant.x``/``sensor.x``/``ctrl.x`` -> (topic, field)."""
+    """``topic:field`` or a plan's signal name (``plant.speed_rpm``) -> (topic, field)."""
     spec = spec.strip()
     if ":" in spec:
         topic, _, name = spec.partition(":")
         if topic.startswith("/") and name:
             return topic, name
-    else:
-        prefix, dot, name = spec.partition(".")
-        if dot and name and prefix in SIGNAL_PREFIXES:
-            return SIGNAL_PREFIXES[prefix], name
+    elif not spec.startswith("/"):
+        source = log_source(spec)
+        if source is not None and (source[1] != STEP_FIELD or spec in SIGNAL_CATALOG):
+            return source
+        group, _, field = spec.partition(".")
+        if source is not None and group in LOG_TOPICS:   # its topic's fields say what there is
+            return LOG_TOPICS[group], field
+        if source is not None:
+            import difflib      # an unknown name's message only
+
+            close = difflib.get_close_matches(spec, list(SIGNAL_CATALOG), n=1, cutoff=0.75)
+            hint = f"; did you mean '{close[0]}'?" if close else ""
+            raise LogCommandError(f"signal {spec!r} is not a signal plans name (test_plans/"
+                                  f"README.md, Signals){hint}")
     raise LogCommandError(
-        f"signal {spec!r}: write TOPIC:FIELD (e.g. /plant/truth:speed_rpm) or "
-        f"{', '.join(p + '.FIELD' for p in SIGNAL_PREFIXES)}")
+        f"signal {spec!r}: write TOPIC:FIELD (e.g. /plant/truth:speed_rpm) or a plan's signal "
+        f"name ({', '.join(p + '.FIELD' for p in LOG_TOPICS)}, board.state, ...)")
+
+
+def field_unit(topic: str, field: str) -> str:
+    """The unit of `field` of `topic`: for a plan's signal the one the plan runner gives it
+    (SignalSet.from_arrays: the recorder's unit, else the catalogue's), else from the
+    field's name ('' when it says none)."""
+    name = plan_name(topic, field)
+    if name is None:
+        return unit_of(field)
+    empty = np.empty(0)
+    return SignalSet.from_arrays({name: (empty, empty, unit_of(field))})[name].unit
 
 
 # -- info -----------------------------------------------------------------------------------------
 
 def log_info(path: str | Path) -> dict[str, Any]:
-    """Channels, message counts, duration, metadata and attachments (see log_summary)."""
-    return log_summary(path)
+    """Channels, message counts, duration, metadata and attachments (see log_summary); each
+    channel's ``fields`` with their ``unit`` and the ``signal`` name plans use (or None)."""
+    info = log_summary(path)
+    for ch in info["channels"]:
+        ch["fields"] = [{"field": f, "unit": field_unit(ch["topic"], f),
+                         "signal": plan_name(ch["topic"], f)} for f in ch["field_names"]]
+        del ch["field_names"]
+    return info
 
 
 def format_info(info: dict[str, Any]) -> str:
@@ -71,6 +100,12 @@ def format_info(info: dict[str, Any]) -> str:
     lines.append("channels:")
     for r in rows:
         lines.append("  " + "  ".join(c.ljust(w) if i < 3 else c.rjust(w) for i, (c, w) in enumerate(zip(r, widths))))
+    lines.append("fields (topic:field, unit, the name plans use):")
+    fields = [(f"{ch['topic']}:{f['field']}", f"[{f['unit'] or '-'}]", f["signal"] or "")
+              for ch in info["channels"] for f in ch["fields"]]
+    w0 = max((len(r[0]) for r in fields), default=0)
+    w1 = max((len(r[1]) for r in fields), default=0)
+    lines += [f"  {a.ljust(w0)}  {b.ljust(w1)}  {c}".rstrip() for a, b, c in fields]
     if info["metadata"]:
         lines.append("metadata:")
         for name, data in info["metadata"].items():
@@ -123,6 +158,14 @@ def _field(data: LogData, topic: str, name: str, spec: str) -> np.ndarray:
 def log_plot(path: str | Path, signals: list[str], out_png: str | Path,
              t0: float | None = None, t1: float | None = None) -> dict[str, Any]:
     """One stacked subplot per signal over [t0, t1] s, written to `out_png`."""
+    series, data = plot_series(path, signals, t0, t1)
+    return _draw(path, series, data, out_png)
+
+
+def plot_series(path: str | Path, signals: list[str], t0: float | None = None,
+                t1: float | None = None) -> tuple[list[tuple], LogData]:
+    """What `log_plot` draws: (spec, topic, field, t_s, float64 values) per signal, and the
+    data read; a signal that does not resolve to numbers raises LogCommandError."""
     if not signals:
         raise LogCommandError("no signal to plot: name at least one (e.g. plant.speed_rpm)")
     parsed = [(spec, *parse_signal(spec)) for spec in signals]
@@ -137,7 +180,10 @@ def log_plot(path: str | Path, signals: list[str], out_png: str | Path,
     if all(len(s[3]) == 0 for s in series):
         window = f" in the window {t0 if t0 is not None else 'start'} .. {t1 if t1 is not None else 'end'} s"
         raise LogCommandError(f"{path}: no samples of {', '.join(signals)}{window}")
+    return series, data
 
+
+def _draw(path: str | Path, series: list[tuple], data: LogData, out_png: str | Path) -> dict[str, Any]:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -145,10 +191,15 @@ def log_plot(path: str | Path, signals: list[str], out_png: str | Path,
     fig, axes = plt.subplots(len(series), 1, sharex=True, squeeze=False,
                              figsize=(10, 1.0 + 2.0 * min(len(series), 8)))
     for ax, (spec, topic, name, t, v) in zip(axes[:, 0], series):
-        tp, vp = _envelope(t, v, _PLOT_POINTS)
-        ax.plot(tp, vp, linewidth=0.8)
-        ax.set_ylabel(name)
-        ax.set_title(f"{topic}:{name}", fontsize=9, loc="left")
+        unit = field_unit(topic, name)
+        if is_held(topic):      # changes of a held value: a step from each to the next
+            ax.step(t, v, where="post", linewidth=0.8)
+        else:
+            tp, vp = _envelope(t, v, _PLOT_POINTS)
+            ax.plot(tp, vp, linewidth=0.8)
+        ax.set_ylabel(f"{name} [{unit}]" if unit else name)
+        signal = plan_name(topic, name)
+        ax.set_title(f"{topic}:{name}" + (f" ({signal})" if signal else ""), fontsize=9, loc="left")
         ax.grid(True, alpha=0.3)
     axes[-1, 0].set_xlabel("time from log start [s]")
     note = "" if data.complete else " (unfinished log, read to its last chunk)"
@@ -158,7 +209,8 @@ def log_plot(path: str | Path, signals: list[str], out_png: str | Path,
     fig.savefig(out_png, dpi=100)
     plt.close(fig)
     return {"out_png": str(out_png), "complete": data.complete,
-            "signals": {spec: {"topic": topic, "field": name, "samples": int(len(t)),
+            "signals": {spec: {"topic": topic, "field": name, "unit": field_unit(topic, name),
+                               "samples": int(len(t)),
                                "min": float(np.nanmin(v)) if len(v) else None,
                                "max": float(np.nanmax(v)) if len(v) else None}
                         for spec, topic, name, t, v in series}}
@@ -190,7 +242,8 @@ def log_export(path: str | Path, channels: list[str], out_csv: str | Path,
                t0: float | None = None, t1: float | None = None) -> dict[str, Any]:
     """CSV of the chosen channels over [t0, t1] s.
 
-    Each item of `channels` is a topic (all its fields) or a signal (one field). Columns:
+    Each item of `channels` is a topic (all its fields) or a signal (one field: TOPIC:FIELD or
+    a plan's signal name; `units` in the result gives each column's). Columns:
     ``t_s, log_time_ns`` (the log's time) then the fields, always named ``topic:field`` (a
     message's own ``t_s`` field is ``/plant/truth:t_s``, never a second ``t_s`` column); with
     several topics also ``topic``, and rows of all topics are merged in log-time order, each
@@ -243,7 +296,9 @@ def log_export(path: str | Path, channels: list[str], out_csv: str | Path,
         writer = csv.writer(f)
         writer.writerow(columns)
         writer.writerows(cells[i] for i in order.tolist())
-    return {"out_csv": str(out_csv), "rows": len(cells), "columns": columns, "complete": data.complete}
+    units = {f"{topic}:{n}": field_unit(topic, n) for topic, _, names, _ in blocks for n in names}
+    return {"out_csv": str(out_csv), "rows": len(cells), "columns": columns, "units": units,
+            "complete": data.complete}
 
 
 def _text_column(values: np.ndarray) -> list[str]:

@@ -361,6 +361,7 @@ def log_summary(path: str | Path) -> dict[str, Any]:
                 "first_s": (first - start) / 1e9 if t else None,
                 "last_s": (last - start) / 1e9 if t else None,
                 "rate_hz": (len(t) - 1) / span if len(t) > 1 and span > 0 else None,
+                "field_names": _schema_fields(f.path, ch.message_encoding, schema),
             })
         return {
             "path": str(scan.path),
@@ -380,6 +381,43 @@ def log_summary(path: str | Path) -> dict[str, Any]:
             "metadata": {m.name: dict(m.metadata) for m in scan.metadata},
             "attachments": [{"name": n, "media_type": t, "size_bytes": s} for n, t, s in scan.attachments],
         }
+
+
+def _schema_fields(path: Path, encoding: str, schema: Schema | None) -> list[str]:
+    """The columns read_log gives a channel, from its schema alone: a protobuf message's
+    fields, a JSON Schema's properties (nested objects as ``a.b``, as _flatten does); [] for
+    anything else."""
+    if schema is None or not schema.data:
+        return []
+    if encoding == "protobuf" and schema.encoding == "protobuf":
+        try:
+            fds = descriptor_pb2.FileDescriptorSet.FromString(schema.data)
+        except Exception as exc:
+            raise _err(path, f"schema {schema.name!r} is not a valid protobuf FileDescriptorSet ({exc})") from None
+        package, _, short = schema.name.rpartition(".")
+        for file in fds.file:
+            for msg in file.message_type:
+                if file.package == package and msg.name == short:
+                    return [fd.name for fd in msg.field]
+        return []
+    if encoding == "json" and schema.encoding == "jsonschema":
+        try:
+            return _json_properties(json.loads(schema.data))
+        except ValueError:
+            raise _err(path, f"schema {schema.name!r} is not valid JSON") from None
+    return []
+
+
+def _json_properties(node: Any, prefix: str = "") -> list[str]:
+    props = node.get("properties") if isinstance(node, dict) else None
+    if not isinstance(props, dict):
+        return [prefix] if prefix else []
+    out: list[str] = []
+    for key, sub in props.items():
+        name = f"{prefix}.{key}" if prefix else str(key)
+        nested = sub.get("properties") if isinstance(sub, dict) else None
+        out += _json_properties(sub, name) if nested else [name]
+    return out
 
 
 def read_attachment(path: str | Path, name: str) -> bytes:

@@ -36,8 +36,48 @@ COMMAND_FIELDS = ("enable", "speed_source", "speed_ref_rpm", "torque_mode", "tor
                   "flux_ref_wb")
 #: Step signals every run has (0 until they change): the board's latched fault code (FAULT,
 #: STATUS), the Modbus bits of the injected faults in effect (hil/faults/injector.py), and the
-#: board's state from STATUS and whether it is ready (hil/session/board_state.py).
-STEP_SIGNALS = ("ctrl.fault_code", "fault.active_bits", "board.state", "board.ready")
+#: board's state from STATUS and whether it is ready (hil/session/board_state.py), and the leg
+#: enables of a DUTY_LEGS board's answers (0 on every other board).
+STEP_SIGNALS = ("ctrl.fault_code", "fault.active_bits", "board.state", "board.ready",
+                "ctrl.leg_enable")
+
+#: Where a run log keeps each group of signals: plan name ``group.field`` -> that topic's
+#: ``field``. A step signal ``board.state`` is the ``value`` of topic /step/board.state,
+#: written at the first logged period, then at each change. `log_source` and `plan_name` are the one mapping between the two.
+LOG_TOPICS = {"plant": "/plant/truth", "sensor": "/plant/sensors", "ctrl": "/ctrl/telemetry",
+              "cmd": "/cmd"}
+STEP_TOPIC_PREFIX = "/step/"
+STEP_FIELD = "value"
+_GROUP_FIELDS = {"plant": TRUTH_FIELDS, "sensor": SENSOR_FIELDS, "ctrl": TELEMETRY_FIELDS,
+                 "cmd": COMMAND_FIELDS}
+#: Topics whose messages are changes of a value held until the next (commands, step signals).
+HELD_TOPICS = ("/cmd",)
+
+
+def log_source(name: str) -> tuple[str, str] | None:
+    """(topic, field) of the signal `name` (``group.field``) in a run log; None if not a
+    signal name."""
+    group, dot, field = name.partition(".")
+    if not (dot and group and field):
+        return None
+    if field in _GROUP_FIELDS.get(group, ()):
+        return LOG_TOPICS[group], field
+    return STEP_TOPIC_PREFIX + name, STEP_FIELD
+
+
+def plan_name(topic: str, field: str) -> str | None:
+    """The signal name plans use for `field` of `topic` in a run log, None if it has none."""
+    for group, group_topic in LOG_TOPICS.items():
+        if topic == group_topic:
+            return f"{group}.{field}" if field in _GROUP_FIELDS[group] else None
+    if topic.startswith(STEP_TOPIC_PREFIX) and field == STEP_FIELD:
+        return topic[len(STEP_TOPIC_PREFIX):]
+    return None
+
+
+def is_held(topic: str) -> bool:
+    """True if the topic's messages are changes of values held until the next."""
+    return topic in HELD_TOPICS or topic.startswith(STEP_TOPIC_PREFIX)
 
 
 #: The C codec's row writers (one call a period's rows, one a TELEMETRY), or None.
@@ -116,6 +156,10 @@ class Recorder:
         # Step signals that change now and then (board fault code, injected faults):
         # name -> [(period, value)], held until the next change.
         self.step_rows: dict[str, list[tuple[int, float]]] = {name: [] for name in STEP_SIGNALS}
+        # step signals in the log: rows of step_rows written (or passed), and the value held
+        self._step_logged: dict[str, int] = {}
+        self._step_held: dict[str, float] = {}
+        self._last_logged_period: int | None = None
         self._log = None
         self._truth_ch = self._sensor_ch = self._telemetry_ch = None
         self._frames_ch = None
@@ -206,6 +250,11 @@ class Recorder:
                 t_ns = _log_times(periods, self.period_s)
                 self._truth_ch.write_many(t_ns, truth)
                 self._sensor_ch.write_many(t_ns, sensors)
+                self._log_steps(int(periods[0]), int(periods[-1]))
+                self._last_logged_period = int(periods[-1])
+        elif log is not None and self._last_logged_period is not None:
+            # a change that came after the last period's rows (a STATUS at the run's end)
+            self._log_steps(self._last_logged_period, self._last_logged_period)
         if m:
             rows = self._telemetry_stage[:m].copy()
             self._telemetry_blocks.append(rows)
@@ -286,6 +335,31 @@ class Recorder:
         """A step signal (``group.field``) takes ``value`` from period k on."""
         self.step_rows.setdefault(name, []).append((k, float(value)))
 
+    def _log_steps(self, first: int, last: int) -> None:
+        """The step signals' changes up to period `last` into the log, one topic each, in
+        time order: a signal's first message is its value at period `first` (0 before any
+        change), later ones each change (sealed with the batch of periods first..last)."""
+        for name, rows in self.step_rows.items():
+            i = self._step_logged.get(name)
+            if i is None:               # not in the log yet: its value at `first`
+                value, i = 0.0, 0
+                while i < len(rows) and rows[i][0] <= first:
+                    value, i = rows[i][1], i + 1
+                self._write_step(name, first, value)
+            held = self._step_held[name]
+            while i < len(rows) and rows[i][0] <= last:
+                k, value = rows[i]
+                if value != held:
+                    self._write_step(name, k, value)
+                    held = value
+                i += 1
+            self._step_logged[name] = i
+
+    def _write_step(self, name: str, k: int, value: float) -> None:
+        self._step_held[name] = value
+        self._log.write_json(STEP_TOPIC_PREFIX + name, round(k * self.period_s * 1e9),
+                             {STEP_FIELD: value, "period": k})
+
     def frames(self, k: int, capture: dict[str, tuple[bytes, int]]) -> None:
         """Raw frames of the last batch of periods, one log message per direction."""
         if self._log is None:
@@ -308,8 +382,7 @@ class Recorder:
             t = k * self.period_s
             truth = self.truth_rows
             for i, name in enumerate(TRUTH_FIELDS):
-                if name != "t_s":
-                    out[f"plant.{name}"] = (t, truth[:, i], unit_of(name))
+                out[f"plant.{name}"] = (t, truth[:, i], unit_of(name))
             sensors = self.sensor_rows
             for i, name in enumerate(SENSOR_FIELDS):
                 out[f"sensor.{name}"] = (t, sensors[:, i], "")
