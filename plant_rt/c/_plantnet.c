@@ -1546,125 +1546,185 @@ static PyObject *mod_settle(PyObject *self, PyObject *const *args, Py_ssize_t na
                          n.kinds[2], n.events);
 }
 
-/* Plant._leg_period's numerics from the windows on. Returns 0 (the period is not one the
- * constant-vector form may take: the caller uses the general network), 1 (done: st, out),
- * -1 (more edges than this code holds: the caller uses the Python version), -2 with an
- * exception (rk4_steps; st unchanged). */
-static int leg_period(const cfg_t *m, double lind, int spm, double T, double wins[6][MAX_WIN][2],
-                      const int nwin[6], double ud, double knee, double vdc, double *st,
-                      double h_max, double v0, double slope, double bw, double *out, int *h_end)
+/* The working state of one leg_period call, handed by pointer from step to step. */
+typedef struct {
+    int need[3];            /* legs whose current must keep its sign over the period */
+    int nneed;
+    double signs[3];        /* that sign (+1, -1; 0 for a leg that needs none) */
+    double cur0[3];         /* phase currents at the period's start (A), once needed */
+    int have_cur0;
+    int h0;                 /* legs high at t = 0 (bit x: leg x) */
+    double tog_t[MAX_TOG];  /* the legs' toggles: time (s) ... */
+    int tog_b[MAX_TOG];     /* ... and the leg's bit */
+    int ntog;
+    piece_t pieces[MAX_TOG + 1];
+    double edges[MAX_TOG + 2]; /* the pieces' start times (s), then T */
+    int np;
+    double ua_int, ub_int;  /* the period's integral of the stator voltage (V s) */
+    int h_end;              /* the leg-high pattern at the period's end */
+} leg_work_t;
+
+/* The on-time (s) of a leg's high and low windows in *on; 0 when they overlap (a shoot-through
+ * the constant-vector form does not model), else 1. */
+static int leg_on_time(const double (*hi)[2], int nhi, const double (*lo)[2], int nlo,
+                       double *on)
 {
-    int need[3], nneed = 0;
-    double signs[3] = {0.0, 0.0, 0.0};
-    double cur0[3] = {0.0, 0.0, 0.0};
-    int have_cur0 = 0;
-    int h0 = 0;
-    double tog_t[MAX_TOG];
-    int tog_b[MAX_TOG];
-    int ntog = 0;
+    double sum = 0.0;
+    for (int i = 0; i < nhi; i++) {
+        double a = hi[i][0], b = hi[i][1];
+        sum += b - a;
+        for (int k = 0; k < nlo; k++) {
+            if (a < lo[k][1] && lo[k][0] < b) {
+                return 0;
+            }
+        }
+    }
+    for (int k = 0; k < nlo; k++) {
+        sum += lo[k][1] - lo[k][0];
+    }
+    *on = sum;
+    return 1;
+}
+
+/* The gaps between a leg's low windows over [0, T] in high[]: where a leg with negative current
+ * sits at the high rail through its upper diode. Returns their number. */
+static int low_window_gaps(const double (*lo)[2], int nlo, double T, double high[][2])
+{
+    int nh = 0;
+    double t = 0.0;
+    for (int k = 0; k < nlo; k++) {
+        if (lo[k][0] > t) {
+            high[nh][0] = t;
+            high[nh][1] = lo[k][0];
+            nh++;
+        }
+        t = lo[k][1];
+    }
+    if (t < T) {
+        high[nh][0] = t;
+        high[nh][1] = T;
+        nh++;
+    }
+    return nh;
+}
+
+/* Leg x conducts through a diode part of the period: notes the sign its current (at the
+ * period's start) must keep. 0 when the form may not take it (a general motor, a current
+ * within the knee), else 1. */
+static int note_leg_sign(leg_work_t *w, const cfg_t *m, int spm, const double *st, int x,
+                         double ud, double knee)
+{
+    if (!spm) {
+        return 0;
+    }
+    if (!w->have_cur0) {
+        double ia, ib;
+        currents(m, st[0], st[1], st[3], &ia, &ib);
+        w->cur0[0] = ia;
+        w->cur0[1] = -0.5 * ia + S32 * ib;
+        w->cur0[2] = -0.5 * ia - S32 * ib;
+        w->have_cur0 = 1;
+    }
+    double ix = w->cur0[x];
+    double thr = ud > 0.0 ? knee : 0.0;
+    if (fabs(ix) <= thr + ZERO_CURRENT_A) {
+        return 0;
+    }
+    w->signs[x] = ix > 0.0 ? 1.0 : -1.0;
+    w->need[w->nneed++] = x;
+    return 1;
+}
+
+/* The high windows' edges of one leg as toggles (an edge at 0 sets the leg high from the
+ * start, one at T is no toggle). -1 when they do not fit, else 0. */
+static int add_leg_toggles(leg_work_t *w, const double (*hi)[2], int nhi, double T, int bit)
+{
+    for (int i = 0; i < nhi; i++) {
+        double a = hi[i][0], b = hi[i][1];
+        if (w->ntog + 2 > MAX_TOG) {
+            return -1;
+        }
+        if (a <= 0.0) {
+            w->h0 |= bit;
+        } else {
+            w->tog_t[w->ntog] = a;
+            w->tog_b[w->ntog++] = bit;
+        }
+        if (b < T) {
+            w->tog_t[w->ntog] = b;
+            w->tog_b[w->ntog++] = bit;
+        }
+    }
+    return 0;
+}
+
+/* Every leg's toggles from its switch windows, with the signs the diode-conducting legs need.
+ * 1, or 0 (not a constant-vector period), or -1 (too many edges). */
+static int leg_toggles(leg_work_t *w, const cfg_t *m, int spm, double T,
+                       double wins[6][MAX_WIN][2], const int nwin[6], double ud, double knee,
+                       const double *st)
+{
     for (int x = 0; x < 3; x++) {
-        double (*hi)[2] = wins[2 * x];
-        double (*lo)[2] = wins[2 * x + 1];
+        const double (*hi)[2] = (const double (*)[2])wins[2 * x];
+        const double (*lo)[2] = (const double (*)[2])wins[2 * x + 1];
         int nhi = nwin[2 * x], nlo = nwin[2 * x + 1];
         double high[MAX_WIN + 1][2];
-        double on = 0.0;
-        for (int i = 0; i < nhi; i++) {
-            double a = hi[i][0], b = hi[i][1];
-            on += b - a;
-            for (int k = 0; k < nlo; k++) {
-                if (a < lo[k][1] && lo[k][0] < b) {
-                    return 0;
-                }
-            }
-        }
-        for (int k = 0; k < nlo; k++) {
-            on += lo[k][1] - lo[k][0];
+        double on;
+        if (!leg_on_time(hi, nhi, lo, nlo, &on)) {
+            return 0;
         }
         if (ud > 0.0 || on < T * (1.0 - 1e-12)) {
-            if (!spm) {
+            if (!note_leg_sign(w, m, spm, st, x, ud, knee)) {
                 return 0;
             }
-            if (!have_cur0) {
-                double ia, ib;
-                currents(m, st[0], st[1], st[3], &ia, &ib);
-                cur0[0] = ia;
-                cur0[1] = -0.5 * ia + S32 * ib;
-                cur0[2] = -0.5 * ia - S32 * ib;
-                have_cur0 = 1;
-            }
-            double ix = cur0[x];
-            double thr = ud > 0.0 ? knee : 0.0;
-            if (fabs(ix) <= thr + ZERO_CURRENT_A) {
-                return 0;
-            }
-            signs[x] = ix > 0.0 ? 1.0 : -1.0;
-            need[nneed++] = x;
-            if (ix < 0.0) {
-                int nh = 0;
-                double t = 0.0;
-                for (int k = 0; k < nlo; k++) {
-                    if (lo[k][0] > t) {
-                        high[nh][0] = t;
-                        high[nh][1] = lo[k][0];
-                        nh++;
-                    }
-                    t = lo[k][1];
-                }
-                if (t < T) {
-                    high[nh][0] = t;
-                    high[nh][1] = T;
-                    nh++;
-                }
-                hi = high;
-                nhi = nh;
+            if (w->cur0[x] < 0.0) {
+                nhi = low_window_gaps(lo, nlo, T, high);
+                hi = (const double (*)[2])high;
             }
         }
-        int bit = 1 << x;
-        for (int i = 0; i < nhi; i++) {
-            double a = hi[i][0], b = hi[i][1];
-            if (ntog + 2 > MAX_TOG) {
-                return -1;
-            }
-            if (a <= 0.0) {
-                h0 |= bit;
-            } else {
-                tog_t[ntog] = a;
-                tog_b[ntog++] = bit;
-            }
-            if (b < T) {
-                tog_t[ntog] = b;
-                tog_b[ntog++] = bit;
-            }
+        if (add_leg_toggles(w, hi, nhi, T, 1 << x) < 0) {
+            return -1;
         }
     }
-    /* sort (time, bit) as Python sorts the tuples */
-    for (int i = 1; i < ntog; i++) {
-        double tt = tog_t[i];
-        int bb = tog_b[i];
+    return 1;
+}
+
+/* Sorts the toggles by (time, bit) as Python sorts the tuples (insertion sort: few, nearly
+ * in order). */
+static void sort_toggles(leg_work_t *w)
+{
+    for (int i = 1; i < w->ntog; i++) {
+        double tt = w->tog_t[i];
+        int bb = w->tog_b[i];
         int j = i - 1;
-        while (j >= 0 && (tog_t[j] > tt || (tog_t[j] == tt && tog_b[j] > bb))) {
-            tog_t[j + 1] = tog_t[j];
-            tog_b[j + 1] = tog_b[j];
+        while (j >= 0 && (w->tog_t[j] > tt || (w->tog_t[j] == tt && w->tog_b[j] > bb))) {
+            w->tog_t[j + 1] = w->tog_t[j];
+            w->tog_b[j + 1] = w->tog_b[j];
             j--;
         }
-        tog_t[j + 1] = tt;
-        tog_b[j + 1] = bb;
+        w->tog_t[j + 1] = tt;
+        w->tog_b[j + 1] = bb;
     }
-    double off_a = -ud * (2.0 * signs[0] - signs[1] - signs[2]) / 3.0;
-    double off_b = -ud * (signs[1] - signs[2]) / SQRT3;
-    piece_t pieces[MAX_TOG + 1];
-    double edges[MAX_TOG + 2];
+}
+
+/* The constant-vector pieces between the toggles: each one's length, stator voltage (the
+ * leg pattern's vector at vdc plus the diode legs' drop) and DC-link current gain; the
+ * voltage's integral over the period and the final leg pattern. */
+static void build_pieces(leg_work_t *w, double T, double vdc, double ud)
+{
+    double off_a = -ud * (2.0 * w->signs[0] - w->signs[1] - w->signs[2]) / 3.0;
+    double off_b = -ud * (w->signs[1] - w->signs[2]) / SQRT3;
     int np = 0, ne = 0;
-    edges[ne++] = 0.0;
+    w->edges[ne++] = 0.0;
     double t = 0.0;
-    int h = h0;
+    int h = w->h0;
     double ua_int = 0.0, ub_int = 0.0;
-    for (int i = 0; i <= ntog; i++) {
-        double when = i < ntog ? tog_t[i] : T;
-        if (i == ntog && !(t < T)) {
+    for (int i = 0; i <= w->ntog; i++) {
+        double when = i < w->ntog ? w->tog_t[i] : T;
+        if (i == w->ntog && !(t < T)) {
             break;
         }
-        if (when > t || i == ntog) {
+        if (when > t || i == w->ntog) {
             /* _LEG_UNITS[h] */
             double ua = ((double)(2 * (h & 1)) - (double)(h >> 1 & 1) - (double)(h >> 2 & 1)) / 3.0;
             double ub = ((double)(h >> 1 & 1) - (double)(h >> 2 & 1)) / SQRT3;
@@ -1677,72 +1737,108 @@ static int leg_period(const cfg_t *m, double lind, int spm, double T, double win
             }
             double va = ua * vdc + off_a;
             double vb = ub * vdc + off_b;
-            pieces[np].len = when - t;
-            pieces[np].va = va;
-            pieces[np].vb = vb;
-            pieces[np].ga = ga;
-            pieces[np].gb = gb;
+            w->pieces[np].len = when - t;
+            w->pieces[np].va = va;
+            w->pieces[np].vb = vb;
+            w->pieces[np].ga = ga;
+            w->pieces[np].gb = gb;
             np++;
             ua_int += va * (when - t);
             ub_int += vb * (when - t);
-            edges[ne++] = when;
+            w->edges[ne++] = when;
             t = when;
         }
-        if (i < ntog) {
-            h ^= tog_b[i];
+        if (i < w->ntog) {
+            h ^= w->tog_b[i];
         }
     }
+    w->np = np;
+    w->ua_int = ua_int;
+    w->ub_int = ub_int;
+    w->h_end = h;
+}
+
+/* Plant._signs_hold: every diode leg's current kept its sign over the period, with the
+ * bound on the straight line's error between the pieces' edges. 1 if so, else 0. */
+static int signs_hold(const leg_work_t *w, const cfg_t *m, double lind, double T, double ud,
+                      double knee, double vdc, const double y0[4], const double *st, double v0,
+                      double slope, double bw)
+{
+    double ia, ib;
+    currents(m, st[0], st[1], st[3], &ia, &ib);
+    double cur1[3] = {ia, -0.5 * ia + S32 * ib, -0.5 * ia - S32 * ib};
+    double u_max = 2.0 / 3.0 * (vdc + 2.0 * ud);
+    double w_max = fabs(y0[2]) > fabs(st[2]) ? fabs(y0[2]) : fabs(st[2]);
+    double ia0, ib0;
+    currents(m, y0[0], y0[1], y0[3], &ia0, &ib0);
+    double i0 = hypot(ia0, ib0), i1 = hypot(ia, ib);
+    double i_max = i0 > i1 ? i0 : i1;
+    i_max += T * (u_max + m->p * w_max * m->psim) / lind + 1e-3;
+    double load_max = fabs(v0) + fabs(slope) * T;
+    double alpha_e = m->p * (m->kt * m->psim * i_max + bw * w_max + load_max) * m->ij;
+    double we = m->p * w_max + alpha_e * T;
+    double bound = (m->r / lind * (u_max + m->r * i_max + we * m->psim) +
+                    (we * we + alpha_e) * m->psim) * T * T / 8.0;
+    double thr = lind * (ud > 0.0 ? knee : 0.0) + bound;
+    const piece_t *pieces = w->pieces;
+    for (int k = 0; k < w->nneed; k++) {
+        int x = w->need[k];
+        double ex0 = AX[x][0], ex1 = AX[x][1];
+        double s = w->signs[x];
+        double vx = 0.0, vx_end = 0.0;
+        for (int i = 0; i < w->np; i++) {
+            vx_end += (ex0 * pieces[i].va + ex1 * pieces[i].vb) * pieces[i].len;
+        }
+        double yy0 = lind * w->cur0[x];
+        double dy = lind * cur1[x] - vx_end - yy0;
+        for (int i = 0; i < w->np; i++) {
+            if (s * (vx + yy0 + dy * w->edges[i] / T) <= thr) {
+                return 0;
+            }
+            vx += (ex0 * pieces[i].va + ex1 * pieces[i].vb) * pieces[i].len;
+        }
+        if (s * lind * cur1[x] <= thr) {
+            return 0;
+        }
+    }
+    return 1;
+}
+
+/* Plant._leg_period's numerics from the windows on. Returns 0 (the period is not one the
+ * constant-vector form may take: the caller uses the general network), 1 (done: st, out),
+ * -1 (more edges than this code holds: the caller uses the Python version), -2 with an
+ * exception (rk4_steps; st unchanged). */
+static int leg_period(const cfg_t *m, double lind, int spm, double T, double wins[6][MAX_WIN][2],
+                      const int nwin[6], double ud, double knee, double vdc, double *st,
+                      double h_max, double v0, double slope, double bw, double *out, int *h_end)
+{
+    leg_work_t w;
+    w.nneed = 0;
+    w.signs[0] = w.signs[1] = w.signs[2] = 0.0;
+    w.cur0[0] = w.cur0[1] = w.cur0[2] = 0.0;
+    w.have_cur0 = 0;
+    w.h0 = 0;
+    w.ntog = 0;
+    int r = leg_toggles(&w, m, spm, T, wins, nwin, ud, knee, st);
+    if (r <= 0) {
+        return r;
+    }
+    sort_toggles(&w);
+    build_pieces(&w, T, vdc, ud);
     double y0[4] = {st[0], st[1], st[2], st[3]};
     double q;
-    if (advance_pieces(m, spm, st, pieces, np, h_max, v0, slope, bw, &q) < 0) {
+    if (advance_pieces(m, spm, st, w.pieces, w.np, h_max, v0, slope, bw, &q) < 0) {
         memcpy(st, y0, sizeof y0);
         return -2;
     }
-    if (nneed) {
-        /* Plant._signs_hold */
-        double ia, ib;
-        currents(m, st[0], st[1], st[3], &ia, &ib);
-        double cur1[3] = {ia, -0.5 * ia + S32 * ib, -0.5 * ia - S32 * ib};
-        double u_max = 2.0 / 3.0 * (vdc + 2.0 * ud);
-        double w_max = fabs(y0[2]) > fabs(st[2]) ? fabs(y0[2]) : fabs(st[2]);
-        double ia0, ib0;
-        currents(m, y0[0], y0[1], y0[3], &ia0, &ib0);
-        double i0 = hypot(ia0, ib0), i1 = hypot(ia, ib);
-        double i_max = i0 > i1 ? i0 : i1;
-        i_max += T * (u_max + m->p * w_max * m->psim) / lind + 1e-3;
-        double load_max = fabs(v0) + fabs(slope) * T;
-        double alpha_e = m->p * (m->kt * m->psim * i_max + bw * w_max + load_max) * m->ij;
-        double we = m->p * w_max + alpha_e * T;
-        double bound = (m->r / lind * (u_max + m->r * i_max + we * m->psim) +
-                        (we * we + alpha_e) * m->psim) * T * T / 8.0;
-        double thr = lind * (ud > 0.0 ? knee : 0.0) + bound;
-        for (int k = 0; k < nneed; k++) {
-            int x = need[k];
-            double ex0 = AX[x][0], ex1 = AX[x][1];
-            double s = signs[x];
-            double vx = 0.0, vx_end = 0.0;
-            for (int i = 0; i < np; i++) {
-                vx_end += (ex0 * pieces[i].va + ex1 * pieces[i].vb) * pieces[i].len;
-            }
-            double yy0 = lind * cur0[x];
-            double dy = lind * cur1[x] - vx_end - yy0;
-            for (int i = 0; i < np; i++) {
-                if (s * (vx + yy0 + dy * edges[i] / T) <= thr) {
-                    memcpy(st, y0, sizeof y0);
-                    return 0;
-                }
-                vx += (ex0 * pieces[i].va + ex1 * pieces[i].vb) * pieces[i].len;
-            }
-            if (s * lind * cur1[x] <= thr) {
-                memcpy(st, y0, sizeof y0);
-                return 0;
-            }
-        }
+    if (w.nneed && !signs_hold(&w, m, lind, T, ud, knee, vdc, y0, st, v0, slope, bw)) {
+        memcpy(st, y0, sizeof y0);
+        return 0;
     }
-    out[0] = ua_int;
-    out[1] = ub_int;
+    out[0] = w.ua_int;
+    out[1] = w.ub_int;
     out[2] = q;
-    *h_end = h;
+    *h_end = w.h_end;
     return 1;
 }
 
