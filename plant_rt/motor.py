@@ -61,6 +61,9 @@ class MotorModel:
         self.b = params.damping_nm_per_rad_s
         self.kt = 1.5 * self.p
         self.spm = self.ld == self.lq
+        # the C kernel's motor constants, in the order of its cfg_t (plant_rt/c/_plantnet.c):
+        # pole_pairs, resistance_ohm, flux_linkage_wb, inv_ld_per_h, inv_lq_per_h,
+        # inv_inertia_per_kgm2, damping_nm_per_rad_s, torque_coeff
         self._k = (float(self.p), self.r, self.psim, self.ild, self.ilq, self.ij, self.b, self.kt)
 
     # ----------------------------------------------------------------- algebra

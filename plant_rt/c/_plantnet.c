@@ -53,17 +53,30 @@ static double SQRT3, S32, INV_SQRT3;
 static const double TWO_THIRDS = 2.0 / 3.0;
 static double AX[3][2];
 
+/* What the kernel knows of the plant besides its state: the Python objects' constants, in
+ * the order of MotorModel._k and Network._cfg (plant_rt/motor.py, plant_rt/circuit.py). */
 typedef struct {
     /* motor (MotorModel._k) */
-    double p, r, psim, ild, ilq, ij, b, kt;
+    double pole_pairs;
+    double resistance_ohm;        /* stator phase resistance */
+    double flux_linkage_wb;       /* permanent-magnet flux linkage (peak, per phase) */
+    double inv_ld_per_h;          /* 1 / L_d */
+    double inv_lq_per_h;          /* 1 / L_q */
+    double inv_inertia_per_kgm2;  /* 1 / J */
+    double damping_nm_per_rad_s;  /* viscous friction */
+    double torque_coeff;          /* 1.5 pole_pairs: T_e = torque_coeff (psi_d i_q - psi_q i_d) */
     /* DC link: mode 0 ideal, 1 resistive, 2 dynamic */
-    int dc_mode, unidir;
-    double src_v, rs, ic;
+    int dc_link_mode, dc_source_unidirectional; /* (unidirectional: the source takes no current) */
+    double dc_source_v;
+    double dc_source_resistance_ohm;
+    double inv_dc_capacitance_per_f; /* 1 / C (0 without a capacitor) */
     /* inverter */
-    double ud, knee;
-    /* load: torque = v0 + slope (t - t_a) + kw w over the interval */
-    int locked;
-    double kw, tl_t, tl_v0, tl_slope;
+    double device_drop_v;         /* a conducting device's forward drop */
+    double device_knee_a;         /* below this current the drop is proportional to it */
+    /* load: torque = load_torque0_nm + load_slope_nm_per_s (t - load_t0_s)
+     *               + load_nm_per_rad_s w over the interval */
+    int load_locked;
+    double load_nm_per_rad_s, load_t0_s, load_torque0_nm, load_slope_nm_per_s;
     int open_phase; /* -1: none */
 } cfg_t;
 
@@ -89,25 +102,25 @@ typedef struct {
 
 static double dc_voltage(const cfg_t *c, double v, double idc)
 {
-    if (c->dc_mode == 2) {
+    if (c->dc_link_mode == 2) {
         return v;
     }
-    if (c->dc_mode == 1) {
-        return c->src_v - c->rs * idc;
+    if (c->dc_link_mode == 1) {
+        return c->dc_source_v - c->dc_source_resistance_ohm * idc;
     }
-    return c->src_v;
+    return c->dc_source_v;
 }
 
 static double dc_dv_dt(const cfg_t *c, double v, double idc)
 {
-    if (c->dc_mode != 2) {
+    if (c->dc_link_mode != 2) {
         return 0.0;
     }
-    double i = (c->src_v - v) / c->rs;
-    if (c->unidir && i < 0.0) {
+    double i = (c->dc_source_v - v) / c->dc_source_resistance_ohm;
+    if (c->dc_source_unidirectional && i < 0.0) {
         i = 0.0;
     }
-    return (i - idc) * c->ic;
+    return (i - idc) * c->inv_dc_capacitance_per_f;
 }
 
 /* ------------------------------------------------------------------ leg states */
@@ -141,17 +154,17 @@ static void configure(net_t *n, const int kinds[3])
 static void project_phase(const net_t *n, int x, double *y)
 {
     const cfg_t *m = &n->c;
-    double e = m->p * y[3];
+    double e = m->pole_pairs * y[3];
     double c = cos(e), s = sin(e);
     double ex0 = AX[x][0], ex1 = AX[x][1];
-    double i_d = (c * y[0] + s * y[1] - m->psim) * m->ild;
-    double i_q = (c * y[1] - s * y[0]) * m->ilq;
+    double i_d = (c * y[0] + s * y[1] - m->flux_linkage_wb) * m->inv_ld_per_h;
+    double i_q = (c * y[1] - s * y[0]) * m->inv_lq_per_h;
     double ia = c * i_d - s * i_q;
     double ib = s * i_d + c * i_q;
     double ix = ex0 * ia + ex1 * ib;
     double rd = c * ex0 + s * ex1;
     double rq = c * ex1 - s * ex0;
-    double delta = -ix / (rd * rd * m->ild + rq * rq * m->ilq);
+    double delta = -ix / (rd * rd * m->inv_ld_per_h + rq * rq * m->inv_lq_per_h);
     y[0] += delta * ex0;
     y[1] += delta * ex1;
 }
@@ -161,11 +174,11 @@ static void project(const net_t *n, double *y)
     if (n->nzero == 0) {
         return;
     }
-    double e = n->c.p * y[3];
+    double e = n->c.pole_pairs * y[3];
     double c = cos(e), s = sin(e);
     if (n->all_zero) {
-        y[0] = n->c.psim * c;
-        y[1] = n->c.psim * s;
+        y[0] = n->c.flux_linkage_wb * c;
+        y[1] = n->c.flux_linkage_wb * s;
         return;
     }
     project_phase(n, n->zero[0], y);
@@ -178,14 +191,14 @@ static void rhs(net_t *n, double t, const double *y, double *out)
 {
     const cfg_t *m = &n->c;
     double pa = y[0], pb = y[1], w = y[2], th = y[3], v = y[4];
-    double e = m->p * th;
+    double e = m->pole_pairs * th;
     double c = cos(e);
     double s = sin(e);
-    double we = m->p * w;
+    double we = m->pole_pairs * w;
     double dpa, dpb, te, idc, vdc, va, vb;
     if (n->all_zero) {
-        va = -we * m->psim * s;
-        vb = we * m->psim * c;
+        va = -we * m->flux_linkage_wb * s;
+        vb = we * m->flux_linkage_wb * c;
         dpa = va;
         dpb = vb;
         te = 0.0;
@@ -197,8 +210,8 @@ static void rhs(net_t *n, double t, const double *y, double *out)
     } else {
         double pd = c * pa + s * pb;
         double pq = c * pb - s * pa;
-        double i_d = (pd - m->psim) * m->ild;
-        double i_q = pq * m->ilq;
+        double i_d = (pd - m->flux_linkage_wb) * m->inv_ld_per_h;
+        double i_q = pq * m->inv_lq_per_h;
         double ia = c * i_d - s * i_q;
         double ib = s * i_d + c * i_q;
         double cur[3] = {ia, -0.5 * ia + S32 * ib, -0.5 * ia - S32 * ib};
@@ -209,14 +222,14 @@ static void rhs(net_t *n, double t, const double *y, double *out)
             }
         }
         vdc = dc_voltage(m, v, idc);
-        double ud = m->ud;
+        double ud = m->device_drop_v;
         double vt[3] = {0.0, 0.0, 0.0};
         for (int x = 0; x < 3; x++) {
             int k = n->kinds[x];
             if (k == K_H || k == K_L) {
                 double drop = 0.0;
                 if (ud != 0.0) {
-                    double z = cur[x] / m->knee;
+                    double z = cur[x] / m->device_knee_a;
                     drop = ud * (z > 1.0 ? 1.0 : z < -1.0 ? -1.0 : z);
                 }
                 vt[x] = (k == K_H ? vdc : 0.0) - drop;
@@ -230,19 +243,19 @@ static void rhs(net_t *n, double t, const double *y, double *out)
         vb = (vt[1] - vt[2]) * INV_SQRT3;
         if (n->nzero) {
             double ex0 = AX[n->zero[0]][0], ex1 = AX[n->zero[0]][1];
-            double did = (c * va + s * vb - m->r * i_d + we * pq) * m->ild;
-            double diq = (c * vb - s * va - m->r * i_q - we * pd) * m->ilq;
+            double did = (c * va + s * vb - m->resistance_ohm * i_d + we * pq) * m->inv_ld_per_h;
+            double diq = (c * vb - s * va - m->resistance_ohm * i_q - we * pd) * m->inv_lq_per_h;
             double rd = c * ex0 + s * ex1;
             double rq = c * ex1 - s * ex0;
             double g0 = rd * did + rq * diq + we * (ex1 * ia - ex0 * ib);
-            double vx = -g0 / (TWO_THIRDS * (rd * rd * m->ild + rq * rq * m->ilq));
+            double vx = -g0 / (TWO_THIRDS * (rd * rd * m->inv_ld_per_h + rq * rq * m->inv_lq_per_h));
             va += TWO_THIRDS * ex0 * vx;
             vb += TWO_THIRDS * ex1 * vx;
             n->vx = vx;
         }
-        dpa = va - m->r * ia;
-        dpb = vb - m->r * ib;
-        te = m->kt * (pd * i_q - pq * i_d);
+        dpa = va - m->resistance_ohm * ia;
+        dpb = vb - m->resistance_ohm * ib;
+        te = m->torque_coeff * (pd * i_q - pq * i_d);
         n->cur[0] = cur[0];
         n->cur[1] = cur[1];
         n->cur[2] = cur[2];
@@ -250,10 +263,10 @@ static void rhs(net_t *n, double t, const double *y, double *out)
     n->vdc = vdc;
     n->te = te;
     double dw;
-    if (m->locked) {
+    if (m->load_locked) {
         dw = 0.0;
     } else {
-        dw = (te - m->b * w - ((m->tl_v0 + m->tl_slope * (t - m->tl_t)) + m->kw * w)) * m->ij;
+        dw = (te - m->damping_nm_per_rad_s * w - ((m->load_torque0_nm + m->load_slope_nm_per_s * (t - m->load_t0_s)) + m->load_nm_per_rad_s * w)) * m->inv_inertia_per_kgm2;
     }
     out[0] = dpa;
     out[1] = dpb;
@@ -267,7 +280,7 @@ static void rhs(net_t *n, double t, const double *y, double *out)
 
 static void release(net_t *n, double va, double vb, double vdc)
 {
-    double ud = n->c.ud;
+    double ud = n->c.device_drop_v;
     double up[3], lo[3];
     for (int x = 0; x < 3; x++) {
         double ex = AX[x][0] * va + AX[x][1] * vb;
@@ -325,17 +338,17 @@ static int event_values(net_t *n, ev_t *out)
     }
     if (n->nzero && n->zero[0] != n->c.open_phase) {
         int x = n->zero[0];
-        out[k].g = n->vx - n->vdc - n->c.ud;
+        out[k].g = n->vx - n->vdc - n->c.device_drop_v;
         out[k].tag = T_HI;
         out[k++].x = x;
-        out[k].g = -n->c.ud - n->vx;
+        out[k].g = -n->c.device_drop_v - n->vx;
         out[k].tag = T_LO;
         out[k++].x = x;
     }
-    if (n->c.ud != 0.0) {
+    if (n->c.device_drop_v != 0.0) {
         for (int x = 0; x < 3; x++) {
             if ((n->kinds[x] == K_H || n->kinds[x] == K_L) && n->knee_side[x]) {
-                out[k].g = n->knee_side[x] * (n->c.knee - fabs(n->cur[x]));
+                out[k].g = n->knee_side[x] * (n->c.device_knee_a - fabs(n->cur[x]));
                 out[k].tag = T_K;
                 out[k++].x = x;
             }
@@ -346,9 +359,9 @@ static int event_values(net_t *n, ev_t *out)
 
 static void note_knee_sides(net_t *n)
 {
-    if (n->c.ud != 0.0) {
+    if (n->c.device_drop_v != 0.0) {
         for (int x = 0; x < 3; x++) {
-            n->knee_side[x] = fabs(n->cur[x]) > n->c.knee ? 1 : -1;
+            n->knee_side[x] = fabs(n->cur[x]) > n->c.device_knee_a ? 1 : -1;
         }
     }
 }
@@ -379,7 +392,7 @@ static void rk4(net_t *n, double t, const double *y, double h, const double *k1,
     for (int i = 0; i < 3; i++) {
         quad[i] = h6 * (k1[5 + i] + 2.0 * (k2[5 + i] + k3[5 + i]) + k4[5 + i]);
     }
-    if (n->c.locked) {
+    if (n->c.load_locked) {
         out[2] = 0.0;
     }
 }
@@ -514,13 +527,13 @@ static int coast(net_t *n, double t0, double t1, const double *y, long steps, do
     double pa0 = y[0], pb0 = y[1], w = y[2], th = y[3], v = y[4];
     double h = (t1 - t0) / (double)steps;
     /* load.segment(t0): the interval's segment starts at tl_t */
-    double v0 = m->tl_v0 + m->tl_slope * (t0 - m->tl_t);
-    double slope = m->tl_slope;
-    double kw = m->kw, b = m->b, ij = m->ij;
+    double v0 = m->load_torque0_nm + m->load_slope_nm_per_s * (t0 - m->load_t0_s);
+    double slope = m->load_slope_nm_per_s;
+    double kw = m->load_nm_per_rad_s, b = m->damping_nm_per_rad_s, ij = m->inv_inertia_per_kgm2;
     for (long i = 0; i < steps; i++) {
         double t = (double)i * h;
         double k1w, k2w, k3w, k4w;
-        if (m->locked) {
+        if (m->load_locked) {
             k1w = k2w = k3w = k4w = 0.0;
             w = 0.0;
         } else {
@@ -534,7 +547,7 @@ static int coast(net_t *n, double t0, double t1, const double *y, long steps, do
         }
         th += h / 6.0 * (w + 2.0 * (w + 0.5 * h * k1w) + 2.0 * (w + 0.5 * h * k2w) + w + h * k3w);
         w += h / 6.0 * (k1w + 2.0 * (k2w + k3w) + k4w);
-        if (m->dc_mode == 2) {
+        if (m->dc_link_mode == 2) {
             double q1 = dc_dv_dt(m, v, 0.0);
             double q2 = dc_dv_dt(m, v + 0.5 * h * q1, 0.0);
             double q3 = dc_dv_dt(m, v + 0.5 * h * q2, 0.0);
@@ -542,9 +555,9 @@ static int coast(net_t *n, double t0, double t1, const double *y, long steps, do
             v += h / 6.0 * (q1 + 2.0 * (q2 + q3) + q4);
         }
     }
-    double e = m->p * th;
-    out[0] = m->psim * cos(e);
-    out[1] = m->psim * sin(e);
+    double e = m->pole_pairs * th;
+    out[0] = m->flux_linkage_wb * cos(e);
+    out[1] = m->flux_linkage_wb * sin(e);
     out[2] = w;
     out[3] = th;
     out[4] = v;
@@ -654,7 +667,7 @@ typedef struct {
 static void advance_general(const cfg_t *m, double *st, double va, double vb, double h, long n,
                             double tl0, double tl_slope, double bw)
 {
-    double p = m->p, r = m->r, psim = m->psim, ild = m->ild, ilq = m->ilq, ij = m->ij, kt = m->kt;
+    double p = m->pole_pairs, r = m->resistance_ohm, psim = m->flux_linkage_wb, ild = m->inv_ld_per_h, ilq = m->inv_lq_per_h, ij = m->inv_inertia_per_kgm2, kt = m->torque_coeff;
     double pa = st[0], pb = st[1], w = st[2], th = st[3];
     double h2 = 0.5 * h;
     double h6 = h / 6.0;
@@ -782,7 +795,7 @@ static inline void rk4_spm_step(double p, double ril, double rk, double kti, dou
 static void advance_spm(const cfg_t *m, double *st, double va, double vb, double h, long n,
                         double tl0, double tl_slope, double bw)
 {
-    double p = m->p, r = m->r, psim = m->psim, ild = m->ild, ij = m->ij, kt = m->kt;
+    double p = m->pole_pairs, r = m->resistance_ohm, psim = m->flux_linkage_wb, ild = m->inv_ld_per_h, ij = m->inv_inertia_per_kgm2, kt = m->torque_coeff;
     double pa = st[0], pb = st[1], w = st[2], th = st[3];
     double h2 = 0.5 * h;
     double t = 0.0;
@@ -808,7 +821,7 @@ static int advance_pieces(const cfg_t *m, int spm, double *st, const piece_t *pi
                           int npieces, double h_max, double tl0, double tl_slope, double bw,
                           double *q_out)
 {
-    double p = m->p, r = m->r, psim = m->psim, ild = m->ild, ij = m->ij, kt = m->kt;
+    double p = m->pole_pairs, r = m->resistance_ohm, psim = m->flux_linkage_wb, ild = m->inv_ld_per_h, ij = m->inv_inertia_per_kgm2, kt = m->torque_coeff;
     double pa = st[0], pb = st[1], w = st[2], th = st[3];
     double t = 0.0, q = 0.0;
     double ril = r * ild;
@@ -870,7 +883,7 @@ static void currents_at(double e, double psim, double ild, double ilq, double pa
 static void currents(const cfg_t *m, double pa, double pb, double th, double *ia, double *ib)
 {
     double i[4];
-    currents_at(m->p * th, m->psim, m->ild, m->ilq, pa, pb, i);
+    currents_at(m->pole_pairs * th, m->flux_linkage_wb, m->inv_ld_per_h, m->inv_lq_per_h, pa, pb, i);
     *ia = i[0];
     *ib = i[1];
 }
@@ -917,34 +930,34 @@ static int get_cfg(PyObject *motor, PyObject *cfg, cfg_t *c)
     if (get_doubles(motor, k, 8, "motor constants") < 0 || get_doubles(cfg, f, NCFG, "cfg") < 0) {
         return -1;
     }
-    c->p = k[0];
-    c->r = k[1];
-    c->psim = k[2];
-    c->ild = k[3];
-    c->ilq = k[4];
-    c->ij = k[5];
-    c->b = k[6];
-    c->kt = k[7];
+    c->pole_pairs = k[0];
+    c->resistance_ohm = k[1];
+    c->flux_linkage_wb = k[2];
+    c->inv_ld_per_h = k[3];
+    c->inv_lq_per_h = k[4];
+    c->inv_inertia_per_kgm2 = k[5];
+    c->damping_nm_per_rad_s = k[6];
+    c->torque_coeff = k[7];
     /* the ranges below before the conversions to int (undefined for NaN or out of int's range);
      * accepted are the values whose truncation is in range, as before */
     if (!(f[0] > -1.0 && f[0] < 3.0) || !(f[12] > -2.0 && f[12] < 3.0)) {
         PyErr_SetString(PyExc_ValueError, "cfg: dc_mode or open_phase out of range");
         return -1;
     }
-    c->dc_mode = (int)f[0];
-    c->src_v = f[1];
-    c->rs = f[2];
-    c->ic = f[3];
-    c->unidir = f[4] != 0.0;
-    c->ud = f[5];
-    c->knee = f[6];
-    c->locked = f[7] != 0.0;
-    c->kw = f[8];
-    c->tl_t = f[9];
-    c->tl_v0 = f[10];
-    c->tl_slope = f[11];
+    c->dc_link_mode = (int)f[0];
+    c->dc_source_v = f[1];
+    c->dc_source_resistance_ohm = f[2];
+    c->inv_dc_capacitance_per_f = f[3];
+    c->dc_source_unidirectional = f[4] != 0.0;
+    c->device_drop_v = f[5];
+    c->device_knee_a = f[6];
+    c->load_locked = f[7] != 0.0;
+    c->load_nm_per_rad_s = f[8];
+    c->load_t0_s = f[9];
+    c->load_torque0_nm = f[10];
+    c->load_slope_nm_per_s = f[11];
     c->open_phase = (int)f[12];
-    if (c->dc_mode < 0 || c->dc_mode > 2 || c->open_phase < -1 || c->open_phase > 2) {
+    if (c->dc_link_mode < 0 || c->dc_link_mode > 2 || c->open_phase < -1 || c->open_phase > 2) {
         PyErr_SetString(PyExc_ValueError, "cfg: dc_mode or open_phase out of range");
         return -1;
     }
@@ -1028,10 +1041,10 @@ static void begin(net_t *n, double t, double *y, const int legs[3], int *last)
     }
     *last = code;
     double ia, ib;
-    double e = n->c.p * y[3];
+    double e = n->c.pole_pairs * y[3];
     double c = cos(e), s = sin(e);
-    double i_d = (c * y[0] + s * y[1] - n->c.psim) * n->c.ild;
-    double i_q = (c * y[1] - s * y[0]) * n->c.ilq;
+    double i_d = (c * y[0] + s * y[1] - n->c.flux_linkage_wb) * n->c.inv_ld_per_h;
+    double i_q = (c * y[1] - s * y[0]) * n->c.inv_lq_per_h;
     ia = c * i_d - s * i_q;
     ib = s * i_d + c * i_q;
     double cur[3] = {ia, -0.5 * ia + S32 * ib, -0.5 * ia - S32 * ib};
@@ -1142,9 +1155,9 @@ static int network_interval(period_args_t *pa, double a, double b, double v0, co
 {
     net_t *n = &pa->n;
     double ta = pa->t0 + a;
-    n->c.tl_t = ta;
-    n->c.tl_v0 = v0;
-    n->c.tl_slope = pa->slope;
+    n->c.load_t0_s = ta;
+    n->c.load_torque0_nm = v0;
+    n->c.load_slope_nm_per_s = pa->slope;
     begin(n, ta, pa->y, legs, &pa->last);
     return net_integrate(n, ta, pa->t0 + b, pa->y, pa->h_max, pa->acc);
 }
@@ -1236,7 +1249,7 @@ static int fast_advance(const cfg_t *m, int spm, double *y, const double v[4], d
     y[3] = st[3];
     acc[0] += v[0] * length;
     acc[1] += v[1] * length;
-    acc[2] += (v[2] * (v[0] * length - (y[0] - pa0)) + v[3] * (v[1] * length - (y[1] - pb0))) / m->r;
+    acc[2] += (v[2] * (v[0] * length - (y[0] - pa0)) + v[3] * (v[1] * length - (y[1] - pb0))) / m->resistance_ohm;
     return 0;
 }
 
@@ -1773,12 +1786,12 @@ static int signs_hold(const leg_work_t *w, const cfg_t *m, double lind, double T
     currents(m, y0[0], y0[1], y0[3], &ia0, &ib0);
     double i0 = hypot(ia0, ib0), i1 = hypot(ia, ib);
     double i_max = i0 > i1 ? i0 : i1;
-    i_max += T * (u_max + m->p * w_max * m->psim) / lind + 1e-3;
+    i_max += T * (u_max + m->pole_pairs * w_max * m->flux_linkage_wb) / lind + 1e-3;
     double load_max = fabs(v0) + fabs(slope) * T;
-    double alpha_e = m->p * (m->kt * m->psim * i_max + bw * w_max + load_max) * m->ij;
-    double we = m->p * w_max + alpha_e * T;
-    double bound = (m->r / lind * (u_max + m->r * i_max + we * m->psim) +
-                    (we * we + alpha_e) * m->psim) * T * T / 8.0;
+    double alpha_e = m->pole_pairs * (m->torque_coeff * m->flux_linkage_wb * i_max + bw * w_max + load_max) * m->inv_inertia_per_kgm2;
+    double we = m->pole_pairs * w_max + alpha_e * T;
+    double bound = (m->resistance_ohm / lind * (u_max + m->resistance_ohm * i_max + we * m->flux_linkage_wb) +
+                    (we * we + alpha_e) * m->flux_linkage_wb) * T * T / 8.0;
     double thr = lind * (ud > 0.0 ? knee : 0.0) + bound;
     const piece_t *pieces = w->pieces;
     for (int k = 0; k < w->nneed; k++) {
@@ -1863,14 +1876,14 @@ static PyObject *mod_leg_period(PyObject *self, PyObject *const *args, Py_ssize_
     if (get_doubles(args[0], k, 8, "motor constants") < 0) {
         return NULL;
     }
-    m.p = k[0];
-    m.r = k[1];
-    m.psim = k[2];
-    m.ild = k[3];
-    m.ilq = k[4];
-    m.ij = k[5];
-    m.b = k[6];
-    m.kt = k[7];
+    m.pole_pairs = k[0];
+    m.resistance_ohm = k[1];
+    m.flux_linkage_wb = k[2];
+    m.inv_ld_per_h = k[3];
+    m.inv_lq_per_h = k[4];
+    m.inv_inertia_per_kgm2 = k[5];
+    m.damping_nm_per_rad_s = k[6];
+    m.torque_coeff = k[7];
     double ld;
     if (get_double(args[1], &ld) < 0) {
         return NULL;
@@ -1961,14 +1974,14 @@ static PyObject *mod_advance(PyObject *self, PyObject *const *args, Py_ssize_t n
     if (n == -1 && PyErr_Occurred()) {
         return NULL;
     }
-    m.p = k[0];
-    m.r = k[1];
-    m.psim = k[2];
-    m.ild = k[3];
-    m.ilq = k[4];
-    m.ij = k[5];
-    m.b = k[6];
-    m.kt = k[7];
+    m.pole_pairs = k[0];
+    m.resistance_ohm = k[1];
+    m.flux_linkage_wb = k[2];
+    m.inv_ld_per_h = k[3];
+    m.inv_lq_per_h = k[4];
+    m.inv_inertia_per_kgm2 = k[5];
+    m.damping_nm_per_rad_s = k[6];
+    m.torque_coeff = k[7];
     double st[4] = {f[0], f[1], f[2], f[3]};
     if (spm) {
         advance_spm(&m, st, f[4], f[5], f[6], n, f[8], f[9], f[10]);
@@ -2910,14 +2923,14 @@ static PyObject *mod_duty_period(PyObject *self, PyObject *const *args, Py_ssize
     }
     cfg_t m;
     memset(&m, 0, sizeof m);
-    m.p = c[0];
-    m.r = c[1];
-    m.psim = c[2];
-    m.ild = c[3];
-    m.ilq = c[4];
-    m.ij = c[5];
-    m.b = c[6];
-    m.kt = c[7];
+    m.pole_pairs = c[0];
+    m.resistance_ohm = c[1];
+    m.flux_linkage_wb = c[2];
+    m.inv_ld_per_h = c[3];
+    m.inv_lq_per_h = c[4];
+    m.inv_inertia_per_kgm2 = c[5];
+    m.damping_nm_per_rad_s = c[6];
+    m.torque_coeff = c[7];
     double ld = c[8], T = c[10], delay_s = c[11], td = c[12], ud = c[13], knee = c[14];
     double h_max = c[15];
     int spm = c[9] != 0.0;
