@@ -85,15 +85,21 @@ typedef struct {
     int tag, x;
 } ev_t;
 
+/* The general network over one interval (Network in plant_rt/circuit.py): the constants, the
+ * legs' states, and what the last RHS evaluation found (the event functions read it). */
 typedef struct {
-    cfg_t c;
-    int kinds[3];
-    int zero[3];
-    int nzero;
-    int all_zero;
-    double cur[3];
-    double vx, vdc, g_release, emf_a, emf_b, te;
-    int rel_out, rel_into;
+    cfg_t cfg;
+    int kinds[3];                /* per phase: K_H, K_L (driven), K_P, K_N (a diode), K_O (open) */
+    int zero[3];                 /* the phases held at zero current (K_O) ... */
+    int nzero;                   /* ... and their number */
+    int all_zero;                /* no current anywhere: the coast */
+    double phase_current_a[3];
+    double floating_terminal_v;  /* the one open phase's terminal voltage (nzero == 1) */
+    double dc_link_v;
+    double release_margin_v;     /* > 0: a line back-EMF overcomes the rails (release) ... */
+    double back_emf_alpha_v, back_emf_beta_v; /* (the coast's stator voltage) */
+    double torque_nm;            /* the electromagnetic torque */
+    int release_out_phase, release_into_phase; /* ... between these two phases */
     int knee_side[3];
     long events, overflows;
 } net_t;
@@ -153,7 +159,7 @@ static void configure(net_t *n, const int kinds[3])
 
 static void project_phase(const net_t *n, int x, double *y)
 {
-    const cfg_t *m = &n->c;
+    const cfg_t *m = &n->cfg;
     double e = m->pole_pairs * y[3];
     double c = cos(e), s = sin(e);
     double ex0 = AX[x][0], ex1 = AX[x][1];
@@ -174,11 +180,11 @@ static void project(const net_t *n, double *y)
     if (n->nzero == 0) {
         return;
     }
-    double e = n->c.pole_pairs * y[3];
+    double e = n->cfg.pole_pairs * y[3];
     double c = cos(e), s = sin(e);
     if (n->all_zero) {
-        y[0] = n->c.flux_linkage_wb * c;
-        y[1] = n->c.flux_linkage_wb * s;
+        y[0] = n->cfg.flux_linkage_wb * c;
+        y[1] = n->cfg.flux_linkage_wb * s;
         return;
     }
     project_phase(n, n->zero[0], y);
@@ -189,7 +195,7 @@ static void project(const net_t *n, double *y)
 /* out: dpsi_a, dpsi_b, dw, dtheta, dv_dc, u_alpha, u_beta, i_dc */
 static void rhs(net_t *n, double t, const double *y, double *out)
 {
-    const cfg_t *m = &n->c;
+    const cfg_t *m = &n->cfg;
     double pa = y[0], pb = y[1], w = y[2], th = y[3], v = y[4];
     double e = m->pole_pairs * th;
     double c = cos(e);
@@ -204,9 +210,9 @@ static void rhs(net_t *n, double t, const double *y, double *out)
         te = 0.0;
         idc = 0.0;
         vdc = dc_voltage(m, v, 0.0);
-        n->cur[0] = n->cur[1] = n->cur[2] = 0.0;
-        n->emf_a = va;
-        n->emf_b = vb;
+        n->phase_current_a[0] = n->phase_current_a[1] = n->phase_current_a[2] = 0.0;
+        n->back_emf_alpha_v = va;
+        n->back_emf_beta_v = vb;
     } else {
         double pd = c * pa + s * pb;
         double pq = c * pb - s * pa;
@@ -251,17 +257,17 @@ static void rhs(net_t *n, double t, const double *y, double *out)
             double vx = -g0 / (TWO_THIRDS * (rd * rd * m->inv_ld_per_h + rq * rq * m->inv_lq_per_h));
             va += TWO_THIRDS * ex0 * vx;
             vb += TWO_THIRDS * ex1 * vx;
-            n->vx = vx;
+            n->floating_terminal_v = vx;
         }
         dpa = va - m->resistance_ohm * ia;
         dpb = vb - m->resistance_ohm * ib;
         te = m->torque_coeff * (pd * i_q - pq * i_d);
-        n->cur[0] = cur[0];
-        n->cur[1] = cur[1];
-        n->cur[2] = cur[2];
+        n->phase_current_a[0] = cur[0];
+        n->phase_current_a[1] = cur[1];
+        n->phase_current_a[2] = cur[2];
     }
-    n->vdc = vdc;
-    n->te = te;
+    n->dc_link_v = vdc;
+    n->torque_nm = te;
     double dw;
     if (m->load_locked) {
         dw = 0.0;
@@ -280,7 +286,7 @@ static void rhs(net_t *n, double t, const double *y, double *out)
 
 static void release(net_t *n, double va, double vb, double vdc)
 {
-    double ud = n->c.device_drop_v;
+    double ud = n->cfg.device_drop_v;
     double up[3], lo[3];
     for (int x = 0; x < 3; x++) {
         double ex = AX[x][0] * va + AX[x][1] * vb;
@@ -297,7 +303,7 @@ static void release(net_t *n, double va, double vb, double vdc)
     static const int pairs[6][2] = {{0, 1}, {0, 2}, {1, 0}, {1, 2}, {2, 0}, {2, 1}};
     double best = -INFINITY;
     int bo = 0, bi = 1;
-    int cut = n->c.open_phase;
+    int cut = n->cfg.open_phase;
     for (int j = 0; j < 6; j++) {
         int x = pairs[j][0], yy = pairs[j][1];
         if (x == cut || yy == cut) {
@@ -310,45 +316,45 @@ static void release(net_t *n, double va, double vb, double vdc)
             bi = yy;
         }
     }
-    n->g_release = best;
-    n->rel_out = bo;
-    n->rel_into = bi;
+    n->release_margin_v = best;
+    n->release_out_phase = bo;
+    n->release_into_phase = bi;
 }
 
 static int event_values(net_t *n, ev_t *out)
 {
     int k = 0;
     if (n->all_zero) {
-        release(n, n->emf_a, n->emf_b, n->vdc);
-        out[0].g = n->g_release;
+        release(n, n->back_emf_alpha_v, n->back_emf_beta_v, n->dc_link_v);
+        out[0].g = n->release_margin_v;
         out[0].tag = T_REL;
         out[0].x = 0;
         return 1;
     }
     for (int x = 0; x < 3; x++) {
         if (n->kinds[x] == K_P) {
-            out[k].g = -n->cur[x];
+            out[k].g = -n->phase_current_a[x];
             out[k].tag = T_I;
             out[k++].x = x;
         } else if (n->kinds[x] == K_N) {
-            out[k].g = n->cur[x];
+            out[k].g = n->phase_current_a[x];
             out[k].tag = T_I;
             out[k++].x = x;
         }
     }
-    if (n->nzero && n->zero[0] != n->c.open_phase) {
+    if (n->nzero && n->zero[0] != n->cfg.open_phase) {
         int x = n->zero[0];
-        out[k].g = n->vx - n->vdc - n->c.device_drop_v;
+        out[k].g = n->floating_terminal_v - n->dc_link_v - n->cfg.device_drop_v;
         out[k].tag = T_HI;
         out[k++].x = x;
-        out[k].g = -n->c.device_drop_v - n->vx;
+        out[k].g = -n->cfg.device_drop_v - n->floating_terminal_v;
         out[k].tag = T_LO;
         out[k++].x = x;
     }
-    if (n->c.device_drop_v != 0.0) {
+    if (n->cfg.device_drop_v != 0.0) {
         for (int x = 0; x < 3; x++) {
             if ((n->kinds[x] == K_H || n->kinds[x] == K_L) && n->knee_side[x]) {
-                out[k].g = n->knee_side[x] * (n->c.device_knee_a - fabs(n->cur[x]));
+                out[k].g = n->knee_side[x] * (n->cfg.device_knee_a - fabs(n->phase_current_a[x]));
                 out[k].tag = T_K;
                 out[k++].x = x;
             }
@@ -359,9 +365,9 @@ static int event_values(net_t *n, ev_t *out)
 
 static void note_knee_sides(net_t *n)
 {
-    if (n->c.device_drop_v != 0.0) {
+    if (n->cfg.device_drop_v != 0.0) {
         for (int x = 0; x < 3; x++) {
-            n->knee_side[x] = fabs(n->cur[x]) > n->c.device_knee_a ? 1 : -1;
+            n->knee_side[x] = fabs(n->phase_current_a[x]) > n->cfg.device_knee_a ? 1 : -1;
         }
     }
 }
@@ -392,7 +398,7 @@ static void rk4(net_t *n, double t, const double *y, double h, const double *k1,
     for (int i = 0; i < 3; i++) {
         quad[i] = h6 * (k1[5 + i] + 2.0 * (k2[5 + i] + k3[5 + i]) + k4[5 + i]);
     }
-    if (n->c.load_locked) {
+    if (n->cfg.load_locked) {
         out[2] = 0.0;
     }
 }
@@ -424,11 +430,11 @@ static void transition(net_t *n, double t, int tag, int x, double *y)
         ev_t g[MAX_G];
         rhs(n, t, y, scratch);
         event_values(n, g);
-        if (kinds[n->rel_out] == K_O) {
-            kinds[n->rel_out] = K_N;
+        if (kinds[n->release_out_phase] == K_O) {
+            kinds[n->release_out_phase] = K_N;
         }
-        if (kinds[n->rel_into] == K_O) {
-            kinds[n->rel_into] = K_P;
+        if (kinds[n->release_into_phase] == K_O) {
+            kinds[n->release_into_phase] = K_P;
         }
     }
     configure(n, kinds);
@@ -523,7 +529,7 @@ static int rk4_steps(double cn, long *steps)
 static int coast(net_t *n, double t0, double t1, const double *y, long steps, double *acc,
                  double *out)
 {
-    const cfg_t *m = &n->c;
+    const cfg_t *m = &n->cfg;
     double pa0 = y[0], pb0 = y[1], w = y[2], th = y[3], v = y[4];
     double h = (t1 - t0) / (double)steps;
     /* load.segment(t0): the interval's segment starts at tl_t */
@@ -563,8 +569,8 @@ static int coast(net_t *n, double t0, double t1, const double *y, long steps, do
     out[4] = v;
     double scratch[8];
     rhs(n, t1, out, scratch);
-    release(n, n->emf_a, n->emf_b, n->vdc);
-    if (n->g_release > 0.0) {
+    release(n, n->back_emf_alpha_v, n->back_emf_beta_v, n->dc_link_v);
+    if (n->release_margin_v > 0.0) {
         return 0;
     }
     acc[0] += out[0] - pa0;
@@ -1000,7 +1006,7 @@ static PyObject *mod_integrate(PyObject *self, PyObject *const *args, Py_ssize_t
     memset(&n, 0, sizeof n);
     double t0, t1, h_max, y[5], acc[3];
     int kinds[3];
-    if (get_cfg(args[0], args[1], &n.c) < 0 || get_kinds(args[2], kinds) < 0 ||
+    if (get_cfg(args[0], args[1], &n.cfg) < 0 || get_kinds(args[2], kinds) < 0 ||
         get_double(args[3], &t0) < 0 || get_double(args[4], &t1) < 0 ||
         get_doubles(args[5], y, 5, "y") < 0 || get_double(args[6], &h_max) < 0) {
         return NULL;
@@ -1028,7 +1034,7 @@ static PyObject *mod_integrate(PyObject *self, PyObject *const *args, Py_ssize_t
         PyList_SetItem(acc_list, i, f); /* steals f */
     }
     return Py_BuildValue("[ddddd](iii)lld", y[0], y[1], y[2], y[3], y[4], n.kinds[0], n.kinds[1],
-                         n.kinds[2], n.events, n.overflows, n.vdc);
+                         n.kinds[2], n.events, n.overflows, n.dc_link_v);
 }
 
 /* Network.begin: the phase states for an interval with the given leg states (H, L or O).
@@ -1041,16 +1047,16 @@ static void begin(net_t *n, double t, double *y, const int legs[3], int *last)
     }
     *last = code;
     double ia, ib;
-    double e = n->c.pole_pairs * y[3];
+    double e = n->cfg.pole_pairs * y[3];
     double c = cos(e), s = sin(e);
-    double i_d = (c * y[0] + s * y[1] - n->c.flux_linkage_wb) * n->c.inv_ld_per_h;
-    double i_q = (c * y[1] - s * y[0]) * n->c.inv_lq_per_h;
+    double i_d = (c * y[0] + s * y[1] - n->cfg.flux_linkage_wb) * n->cfg.inv_ld_per_h;
+    double i_q = (c * y[1] - s * y[0]) * n->cfg.inv_lq_per_h;
     ia = c * i_d - s * i_q;
     ib = s * i_d + c * i_q;
     double cur[3] = {ia, -0.5 * ia + S32 * ib, -0.5 * ia - S32 * ib};
     int kinds[3];
     for (int x = 0; x < 3; x++) {
-        if (x == n->c.open_phase) {
+        if (x == n->cfg.open_phase) {
             kinds[x] = K_O;
         } else if (legs[x] != K_O) {
             kinds[x] = legs[x];
@@ -1090,11 +1096,11 @@ static int period_args(PyObject *const *args, const char *name, period_args_t *p
     if (last_l == -1 && PyErr_Occurred()) {
         return -1;
     }
-    if (get_cfg(args[0], args[1], &pa->n.c) < 0 || get_kinds(args[2], kinds) < 0 ||
+    if (get_cfg(args[0], args[1], &pa->n.cfg) < 0 || get_kinds(args[2], kinds) < 0 ||
         get_double(args[5], &pa->t0) < 0 || get_double(args[6], &pa->T) < 0 ||
         get_doubles(args[7], pa->y, 5, "y") < 0 || get_double(args[8], &pa->h_max) < 0 ||
         get_double(args[10], &pa->seg_t) < 0 || get_double(args[11], &pa->seg_v0) < 0 ||
-        get_double(args[12], &pa->slope) < 0 || get_double(args[13], &pa->n.vdc) < 0) {
+        get_double(args[12], &pa->slope) < 0 || get_double(args[13], &pa->n.dc_link_v) < 0) {
         return -1;
     }
     pa->intervals = args[4];
@@ -1155,9 +1161,9 @@ static int network_interval(period_args_t *pa, double a, double b, double v0, co
 {
     net_t *n = &pa->n;
     double ta = pa->t0 + a;
-    n->c.load_t0_s = ta;
-    n->c.load_torque0_nm = v0;
-    n->c.load_slope_nm_per_s = pa->slope;
+    n->cfg.load_t0_s = ta;
+    n->cfg.load_torque0_nm = v0;
+    n->cfg.load_slope_nm_per_s = pa->slope;
     begin(n, ta, pa->y, legs, &pa->last);
     return net_integrate(n, ta, pa->t0 + b, pa->y, pa->h_max, pa->acc);
 }
@@ -1204,7 +1210,7 @@ static PyObject *mod_period(PyObject *self, PyObject *const *args, Py_ssize_t na
     }
     const net_t *n = &pa.n;
     return Py_BuildValue("[ddddd](iii)illdi", pa.y[0], pa.y[1], pa.y[2], pa.y[3], pa.y[4], n->kinds[0],
-                         n->kinds[1], n->kinds[2], pa.last, n->events, n->overflows, n->vdc, ran);
+                         n->kinds[1], n->kinds[2], pa.last, n->events, n->overflows, n->dc_link_v, ran);
 }
 
 /* A driven word's vector as Plant._vectors holds it: (va, vb, ga, gb, legs); 0 none (None), 1 read,
@@ -1433,7 +1439,7 @@ static int run_intervals(period_args_t *pa, const struct fast_path *f, int *net_
                 return -1;
             }
             if (got) {
-                if (fast_advance(&n->c, f->spm, y, v, length, pa->h_max, v0, pa->slope, f->bw, pa->acc) < 0) {
+                if (fast_advance(&n->cfg, f->spm, y, v, length, pa->h_max, v0, pa->slope, f->bw, pa->acc) < 0) {
                     return -1;
                 }
                 took_driven(pa, driven, net_dirty);
@@ -1441,7 +1447,7 @@ static int run_intervals(period_args_t *pa, const struct fast_path *f, int *net_
             }
             /* _diode_interval: every open leg's diode by its current's sign, tried as that word */
             double ia, ib;
-            currents(&n->c, y[0], y[1], y[3], &ia, &ib);
+            currents(&n->cfg, y[0], y[1], y[3], &ia, &ib);
             double cur[3] = {ia, -0.5 * ia + S32 * ib, -0.5 * ia - S32 * ib};
             long equivalent = 0;
             int diode = 1;
@@ -1469,10 +1475,10 @@ static int run_intervals(period_args_t *pa, const struct fast_path *f, int *net_
                 }
                 double trial[5] = {y[0], y[1], y[2], y[3], y[4]};
                 double part[3] = {0.0, 0.0, 0.0};
-                if (fast_advance(&n->c, f->spm, trial, v, length, pa->h_max, v0, pa->slope, f->bw, part) < 0) {
+                if (fast_advance(&n->cfg, f->spm, trial, v, length, pa->h_max, v0, pa->slope, f->bw, part) < 0) {
                     return -1;
                 }
-                currents(&n->c, trial[0], trial[1], trial[3], &ia, &ib);
+                currents(&n->cfg, trial[0], trial[1], trial[3], &ia, &ib);
                 double after[3] = {ia, -0.5 * ia + S32 * ib, -0.5 * ia - S32 * ib};
                 for (int x = 0; x < 3; x++) {
                     if (legs[x] == K_O && (after[x] > 0.0) != (cur[x] > 0.0)) {
@@ -1527,7 +1533,7 @@ static PyObject *mod_fast_period(PyObject *self, PyObject *const *args, Py_ssize
     const net_t *n = &pa.n;
     return Py_BuildValue("[ddddd](iii)illdO", pa.y[0], pa.y[1], pa.y[2], pa.y[3], pa.y[4],
                          n->kinds[0], n->kinds[1], n->kinds[2], pa.last, n->events, n->overflows,
-                         n->vdc, net_dirty ? Py_True : Py_False);
+                         n->dc_link_v, net_dirty ? Py_True : Py_False);
 }
 
 PyDoc_STRVAR(settle_doc,
@@ -1546,7 +1552,7 @@ static PyObject *mod_settle(PyObject *self, PyObject *const *args, Py_ssize_t na
     memset(&n, 0, sizeof n);
     double t, y[5];
     int kinds[3];
-    if (get_cfg(args[0], args[1], &n.c) < 0 || get_kinds(args[2], kinds) < 0 ||
+    if (get_cfg(args[0], args[1], &n.cfg) < 0 || get_kinds(args[2], kinds) < 0 ||
         get_double(args[3], &t) < 0 || get_doubles(args[4], y, 5, "y") < 0) {
         return NULL;
     }
