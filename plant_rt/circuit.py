@@ -108,7 +108,12 @@ class Network:
         self.event_overflows += overflows
 
     def _cfg(self) -> tuple:
-        """The parameters the C kernel takes besides the motor's constants."""
+        """The parameters the C kernel takes besides the motor's constants, in the order of its
+        cfg_t (plant_rt/c/_plantnet.c): dc_link_mode (0 ideal, 1 resistive, 2 dynamic),
+        dc_source_v, dc_source_resistance_ohm, inv_dc_capacitance_per_f,
+        dc_source_unidirectional, device_drop_v, device_knee_a, load_locked,
+        load_nm_per_rad_s, load_t0_s, load_torque0_nm, load_slope_nm_per_s, open_phase
+        (-1: none)."""
         dc, load = self.dc, self.load
         t_a, v0, slope = self._tl
         return (2.0 if dc.dynamic else 1.0 if dc.resistive else 0.0, dc.source_v, dc.rs, dc.ic,

@@ -24,6 +24,11 @@ mirrors the Python operation by operation (compiled with -ffp-contract=off), so 
 to rounding (tests/test_plant_c_network.py compares them period by period) and a run with
 either is deterministic.
 
+The plant's constants go in as tuples of floats in the order of the kernel's cfg_t, whose
+fields say what each is with its unit: plant_rt.motor.MotorModel._k (pole_pairs,
+resistance_ohm, flux_linkage_wb, inv_ld_per_h, ...) and plant_rt.circuit.Network._cfg (the
+DC link, the inverter's device drop, the load).
+
 Environment: HIL_PLANT_C_PATH loads the extension from another file (the sanitizer build).
 """
 from __future__ import annotations

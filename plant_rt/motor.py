@@ -61,6 +61,9 @@ class MotorModel:
         self.b = params.damping_nm_per_rad_s
         self.kt = 1.5 * self.p
         self.spm = self.ld == self.lq
+        # the C kernel's motor constants, in the order of its cfg_t (plant_rt/c/_plantnet.c):
+        # pole_pairs, resistance_ohm, flux_linkage_wb, inv_ld_per_h, inv_lq_per_h,
+        # inv_inertia_per_kgm2, damping_nm_per_rad_s, torque_coeff
         self._k = (float(self.p), self.r, self.psim, self.ild, self.ilq, self.ij, self.b, self.kt)
 
     # ----------------------------------------------------------------- algebra
@@ -109,43 +112,8 @@ class MotorModel:
                 tl1 = tl0 + tl_slope * t
                 tl2 = tl1 + tl_slope * h2
                 tl4 = tl1 + tl_slope * h
-                e = p * th
-                c = cos(e)
-                s = sin(e)
-                d1a = va - ril * pa + rk * c
-                d1b = vb - ril * pb + rk * s
-                d1w = (kti * (c * pb - s * pa) - bw * w - tl1) * ij
-                xa = pa + h2 * d1a
-                xb = pb + h2 * d1b
-                w2 = w + h2 * d1w
-                e = p * (th + h2 * w)
-                c = cos(e)
-                s = sin(e)
-                d2a = va - ril * xa + rk * c
-                d2b = vb - ril * xb + rk * s
-                d2w = (kti * (c * xb - s * xa) - bw * w2 - tl2) * ij
-                xa = pa + h2 * d2a
-                xb = pb + h2 * d2b
-                w3 = w + h2 * d2w
-                e = p * (th + h2 * w2)
-                c = cos(e)
-                s = sin(e)
-                d3a = va - ril * xa + rk * c
-                d3b = vb - ril * xb + rk * s
-                d3w = (kti * (c * xb - s * xa) - bw * w3 - tl2) * ij
-                xa = pa + h * d3a
-                xb = pb + h * d3b
-                w4 = w + h * d3w
-                e = p * (th + h * w3)
-                c = cos(e)
-                s = sin(e)
-                d4a = va - ril * xa + rk * c
-                d4b = vb - ril * xb + rk * s
-                d4w = (kti * (c * xb - s * xa) - bw * w4 - tl4) * ij
-                pa += h6 * (d1a + 2.0 * (d2a + d3a) + d4a)
-                pb += h6 * (d1b + 2.0 * (d2b + d3b) + d4b)
-                th += h6 * (w + 2.0 * (w2 + w3) + w4)
-                w += h6 * (d1w + 2.0 * (d2w + d3w) + d4w)
+                pa, pb, w, th = rk4_spm_step(p, ril, rk, kti, ij, bw, va, vb, h, tl1, tl2, tl4,
+                                             pa, pb, w, th)
                 t += h
             return pa, pb, w, th
         for _ in range(n):
@@ -234,49 +202,67 @@ class MotorModel:
             else:
                 h = length / n
                 h2 = 0.5 * h
-                h6 = h / 6.0
                 for i in range(n):
                     tl1 = tl0 + tl_slope * (t + i * h)
                     tl2 = tl1 + tl_slope * h2
                     tl4 = tl1 + tl_slope * h
-                    e = p * th
-                    c = cos(e)
-                    s = sin(e)
-                    d1a = va - ril * pa + rk * c
-                    d1b = vb - ril * pb + rk * s
-                    d1w = (kti * (c * pb - s * pa) - bw * w - tl1) * ij
-                    xa = pa + h2 * d1a
-                    xb = pb + h2 * d1b
-                    w2 = w + h2 * d1w
-                    e = p * (th + h2 * w)
-                    c = cos(e)
-                    s = sin(e)
-                    d2a = va - ril * xa + rk * c
-                    d2b = vb - ril * xb + rk * s
-                    d2w = (kti * (c * xb - s * xa) - bw * w2 - tl2) * ij
-                    xa = pa + h2 * d2a
-                    xb = pb + h2 * d2b
-                    w3 = w + h2 * d2w
-                    e = p * (th + h2 * w2)
-                    c = cos(e)
-                    s = sin(e)
-                    d3a = va - ril * xa + rk * c
-                    d3b = vb - ril * xb + rk * s
-                    d3w = (kti * (c * xb - s * xa) - bw * w3 - tl2) * ij
-                    xa = pa + h * d3a
-                    xb = pb + h * d3b
-                    w4 = w + h * d3w
-                    e = p * (th + h * w3)
-                    c = cos(e)
-                    s = sin(e)
-                    d4a = va - ril * xa + rk * c
-                    d4b = vb - ril * xb + rk * s
-                    d4w = (kti * (c * xb - s * xa) - bw * w4 - tl4) * ij
-                    pa += h6 * (d1a + 2.0 * (d2a + d3a) + d4a)
-                    pb += h6 * (d1b + 2.0 * (d2b + d3b) + d4b)
-                    th += h6 * (w + 2.0 * (w2 + w3) + w4)
-                    w += h6 * (d1w + 2.0 * (d2w + d3w) + d4w)
+                    pa, pb, w, th = rk4_spm_step(p, ril, rk, kti, ij, bw, va, vb, h, tl1, tl2,
+                                                 tl4, pa, pb, w, th)
             if ga or gb:
                 q += ga * (va * length - pa + pa0) + gb * (vb * length - pb + pb0)
             t += length
         return pa, pb, w, th, q / r
+
+
+def rk4_spm_step(p: float, ril: float, rk: float, kti: float, ij: float, bw: float, va: float,
+                 vb: float, h: float, tl1: float, tl2: float, tl4: float, pa: float, pb: float,
+                 w: float, th: float) -> tuple[float, float, float, float]:
+    """One classic RK4 step of length h of the Ld = Lq = L motor at the constant stator voltage
+    (va, vb), with the load torque at the step's start, middle and end (tl1, tl2, tl4):
+    ril = R/L, rk = R psi_m/L, kti = 1.5 p psi_m/L, ij = 1/J, bw the speed-proportional torque.
+    Returns (psi_alpha, psi_beta, w, theta_m). MotorModel.advance and advance_pieces both take
+    it (each with its own load-time bookkeeping); plant_rt/c/_plantnet.c's rk4_spm_step is the
+    same operations in the same order.
+
+    Ld = Lq = L: i = (psi - psi_m e_d)/L, so u - R i = u - (R/L) psi + (R psi_m/L) e_d and the
+    psi_m terms cancel out of eq. (6): T = 1.5 p psi_m/L (c psi_b - s psi_a).
+    """
+    h2 = 0.5 * h
+    h6 = h / 6.0
+    e = p * th
+    c = cos(e)
+    s = sin(e)
+    d1a = va - ril * pa + rk * c
+    d1b = vb - ril * pb + rk * s
+    d1w = (kti * (c * pb - s * pa) - bw * w - tl1) * ij
+    xa = pa + h2 * d1a
+    xb = pb + h2 * d1b
+    w2 = w + h2 * d1w
+    e = p * (th + h2 * w)
+    c = cos(e)
+    s = sin(e)
+    d2a = va - ril * xa + rk * c
+    d2b = vb - ril * xb + rk * s
+    d2w = (kti * (c * xb - s * xa) - bw * w2 - tl2) * ij
+    xa = pa + h2 * d2a
+    xb = pb + h2 * d2b
+    w3 = w + h2 * d2w
+    e = p * (th + h2 * w2)
+    c = cos(e)
+    s = sin(e)
+    d3a = va - ril * xa + rk * c
+    d3b = vb - ril * xb + rk * s
+    d3w = (kti * (c * xb - s * xa) - bw * w3 - tl2) * ij
+    xa = pa + h * d3a
+    xb = pb + h * d3b
+    w4 = w + h * d3w
+    e = p * (th + h * w3)
+    c = cos(e)
+    s = sin(e)
+    d4a = va - ril * xa + rk * c
+    d4b = vb - ril * xb + rk * s
+    d4w = (kti * (c * xb - s * xa) - bw * w4 - tl4) * ij
+    return (pa + h6 * (d1a + 2.0 * (d2a + d3a) + d4a),
+            pb + h6 * (d1b + 2.0 * (d2b + d3b) + d4b),
+            w + h6 * (d1w + 2.0 * (d2w + d3w) + d4w),
+            th + h6 * (w + 2.0 * (w2 + w3) + w4))

@@ -50,7 +50,7 @@
 #define CTL_DESIGN_RS_ID_MAX_SPEED_RAD_S 1.0f  /* runs only with the rotor at standstill (encoder speed) */
 #define CTL_DESIGN_DEAD_TIME_COMP_BAND_A 0.1f /* linear zone of sign(i): 8 ADC counts, 16x the 0.5-count noise */
 
-/* python -m hil.ekf_design (DLQE by the discrete Riccati equation) for the
+/* python -m hil.design.ekf (DLQE by the discrete Riccati equation) for the
  * documented noise model: sigma_v = 0.0136077 rad of flux-angle ripple,
  * sigma_w = 0.00625 rad/s per period of speed-increment change; estimator
  * poles at |s| = 568.5 rad/s. tests/test_stub_ekf_design.py checks these

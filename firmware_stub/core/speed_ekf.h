@@ -7,7 +7,7 @@
  * (y1, y2) = (cos theta_s, sin theta_s), eq. (16); the innovation eq. (20)
  *   eps = y2 cos(theta^) - y1 sin(theta^) = sin(theta_s - theta^)
  * is the angle error for small errors, so the steady-state Kalman gain reduces
- * to the three numbers k1, k2, k3 of eq. (19), designed by hil/ekf_design.py.
+ * to the three numbers k1, k2, k3 of eq. (19), designed by hil/design/ekf.py.
  *
  * ekf_step() takes the normalised flux as in the paper (one sincos);
  * ekf_step_angle() takes theta_s itself and forms the same eps as

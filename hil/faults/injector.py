@@ -249,7 +249,7 @@ def injector(session) -> FaultInjector:
 
 
 def apply_fault(session, step) -> None:
-    """A plan's ``fault`` step (hil.plan.FaultStep)."""
+    """A plan's ``fault`` step (hil.plans.format.FaultStep)."""
     inj = injector(session)
     if step.clear:
         inj.clear(step.name, source="plan")

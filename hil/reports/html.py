@@ -388,7 +388,7 @@ def _locus_check_figure(c: CheckResult, signals: SignalSet) -> str:
 
 
 def plan_figure(spec, signals: SignalSet, marks: Mapping[str, float], end_s: float) -> str | None:
-    """A base64 SVG for one entry of a plan's ``plots:`` section (hil.plan.PlotSpec)."""
+    """A base64 SVG for one entry of a plan's ``plots:`` section (hil.plans.format.PlotSpec)."""
     present = [n for n in spec.signals if n in signals]
     if not present or (spec.type == "xy" and len(present) < 2):
         return None
@@ -642,7 +642,7 @@ def write_reports(result: PlanResult, signals: SignalSet, out_dir: str | Path,
                   plan=None) -> dict[str, Path]:
     """Writes junit.xml, report.html and result.json into out_dir; returns their paths.
 
-    plan: the hil.plan.Plan that ran, for its ``plots:`` section (default:
+    plan: the hil.plans.format.Plan that ran, for its ``plots:`` section (default:
     reloaded from result.source).
     """
     out = Path(out_dir)

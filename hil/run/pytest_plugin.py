@@ -2,7 +2,7 @@
 
 Collection: a ``*.yaml`` / ``*.yml`` file below a directory named in the ini
 option ``hil_plan_dirs`` (default ``test_plans``) that looks like a plan (a
-mapping with ``name`` or ``steps``; see hil.plan.looks_like_plan) becomes a
+mapping with ``name`` or ``steps``; see hil.plans.format.looks_like_plan) becomes a
 `PlanFile`. A plan that does not validate is a collection error carrying the
 ConfigError (file, line, key, what was expected).
 

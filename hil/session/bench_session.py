@@ -58,6 +58,31 @@ _INPUT_EVENTS = frozenset({"command", "modbus", "load", "dc_link", "plant_param"
                            "stimulus", "param"})
 
 
+class _Lockstep:
+    """What one BenchSession._run_lockstep call reads once (the session's parts, the link's
+    queue and fast paths, the C loop's arguments), handed to its steps."""
+    __slots__ = ("plant", "link", "recorder", "dispatch", "answer_timeout", "sends", "watchdog",
+                 "mailbox", "on_period", "publish_every", "tap", "clock", "record_telemetry",
+                 "inbox", "fast", "loop", "exchange_periods", "live_every", "direct", "answer")
+
+
+class _PeriodAnswer:
+    """What a period's wait brought: GATES, or the duty (with the leg enables of a DUTY_LEGS);
+    the other messages' kinds and whether a TELEMETRY came (a miss's report); when the first
+    SAMPLE's deadline began (the watchdog's `since`)."""
+    __slots__ = ("gates", "duty", "legs", "others", "saw_telemetry", "first_sent")
+
+    def __init__(self) -> None:
+        self.clear()
+
+    def clear(self) -> None:
+        """Nothing came yet (one object serves every period of a run: none is made a period)."""
+        self.gates = self.duty = self.legs = None
+        self.others = None
+        self.saw_telemetry = False
+        self.first_sent = None
+
+
 @dataclass
 class SessionConfig:
     """How a session is opened: the link, the clock, the log, and overrides of the policy."""
@@ -547,35 +572,63 @@ class BenchSession:
     def _run_lockstep(self, count: int, stop: Callable[[], bool] | None) -> int:
         """SPEC 2.8.1: one deadline per SAMPLE sent; SAMPLE(k) is resent (same values) up to
         answer_resends times before period k counts as missed and the plant holds its gates."""
-        plant = self.plant
-        link = self.conn.link
-        recorder = self.recorder
-        dispatch = self.dispatch
-        answer_timeout = self.answer_wait_s
-        sends = 1 + self.policy.answer_resends
-        watchdog = self.watchdog
-        mailbox = self._mailbox
-        on_period = self.on_period
-        publish_every = self.publish_every
-        tap = self.tap
-        clock = time.monotonic
-        record_telemetry = recorder.telemetry
+        run = self._lockstep_setup()
+        done = 0
+        while done < count:
+            pending = False          # period k sampled, recorded and sent by the C loop
+            sent_at = None           # when it went, over a descriptor (its answer wait runs)
+            if run.loop is not None and not run.watchdog.consecutive and \
+                    (run.tap.direct_ready if run.direct else run.tap.fast_ready):
+                ran, state, extra = self._run_c_periods(run, count - done, stop)
+                done += ran
+                if state == _LOOP_STOPPED:
+                    return done
+                if done >= count:
+                    return count
+                pending = state == _LOOP_PENDING
+                sent_at = extra
+            self._lockstep_period(run, pending, sent_at)
+            done += 1
+            if stop is not None and stop():
+                return done
+        return count
+
+    def _lockstep_setup(self) -> _Lockstep:
+        """What a _run_lockstep call reads once: the session's parts, the link's queue and
+        fast paths, and the C period loop's arguments when it may run."""
+        run = _Lockstep()
+        run.answer = _PeriodAnswer()
+        run.plant = self.plant
+        run.link = self.conn.link
+        run.recorder = recorder = self.recorder
+        run.dispatch = self.dispatch
+        run.answer_timeout = answer_timeout = self.answer_wait_s
+        run.sends = 1 + self.policy.answer_resends
+        run.watchdog = self.watchdog
+        run.mailbox = mailbox = self._mailbox
+        run.on_period = on_period = self.on_period
+        run.publish_every = self.publish_every
+        run.tap = tap = self.tap
+        run.clock = time.monotonic
+        run.record_telemetry = recorder.telemetry
         # what the link tap has already decoded is taken without a call (its recv() would
         # pop the same queue first); an untapped link has no such queue
-        inbox = tap.inbox if tap is not None else ()
+        run.inbox = tap.inbox if tap is not None else ()
         # What dispatch() does with a TELEMETRY, less the hop; a board still in HELLO takes
         # dispatch()'s path (it notes what the board sent before its HELLO).
         if self.board_hello is None:
-            record_telemetry = dispatch
+            run.record_telemetry = run.dispatch
         # A firmware library in this process with the C codec: SAMPLE out and the answers in
         # through one C call while no link fault is active (hil/session/link_tap.py).
-        fast = tap.sample_exchanger() if tap is not None else None
+        run.fast = fast = tap.sample_exchanger() if tap is not None else None
         # The plain periods in between, each one the C loop (ccodec.exchange_periods: the same
         # steps, the same order, no Python frame) while nothing needs this loop: no mailbox or
         # per-period stimulus, the answer kind known and no miss being counted; it hands back
         # every period it does not take (see its docstring), and a live viewer's rows.
-        loop = None
-        direct = fast is None          # the descriptor kind (LinkTap.descriptor_target)
+        run.loop = None
+        run.exchange_periods = None
+        run.live_every = 0
+        run.direct = direct = fast is None   # the descriptor kind (LinkTap.descriptor_target)
         if (tap is not None and mailbox is None
                 and self.board_hello is not None
                 and (on_period is None or getattr(on_period, "idle", False))):
@@ -584,179 +637,209 @@ class BenchSession:
                 from protocol.ccodec import exchange_periods
                 if exchange_periods is not None:
                     live = recorder.live        # its rows (every live.every-th) stay here
-                    loop = (target, plant.sample, plant.truth, plant.step, recorder.batch_stage(),
-                            recorder.seal, publish_every)
-                    live_every = live.every if live is not None else 0
-        done = 0
-        while done < count:
-            pending = False          # period k sampled, recorded and sent by the C loop
-            sent_at = None           # when it went, over a descriptor (its answer wait runs)
-            if loop is not None and not watchdog.consecutive and \
-                    (tap.direct_ready if direct else tap.fast_ready):
-                answer = _ANSWER_CODES.get(self._answer_kind, -1)
-                ran, state, extra = exchange_periods(*loop, count - done, stop, answer, live_every)
-                if direct:
-                    tap.settle_direct()
-                done += ran
-                if state == _LOOP_STOPPED:
-                    return done
-                if state == _LOOP_LINK_ERROR:  # period k recorded, the plant not stepped
-                    self._link_failed(plant.period, tap.direct_failure(*extra))
-                if done >= count:
-                    return count
-                pending = state == _LOOP_PENDING
-                sent_at = extra
-            if mailbox is not None and mailbox.pending:
-                self._apply_mailbox(mailbox)
-            sample = plant.sample()
-            k = sample.period
-            if tap is not None:
-                tap.tick(k)
-                if k % publish_every == 0:
-                    recorder.frames(k, tap.take_capture())
-            gates = duty = legs = None
-            others = None
-            saw_telemetry = False
-            msg_out = None
-            first_sent = None
-            recorded = pending
-            recording = False
-            try:
-                for attempt in range(sends):
-                    if attempt:
-                        self.resent_samples += 1
-                    if pending and not attempt:
-                        pass                      # sent by the C loop
-                    elif fast is not None and not attempt and tap.fast_ready:
-                        fast(k, sample.adc_i1, sample.adc_i2, sample.adc_vdc, sample.encoder,
-                             sample.status)
-                    else:
-                        if msg_out is None:
-                            msg_out = Sample(k, sample.adc_i1, sample.adc_i2, sample.adc_vdc,
-                                             sample.encoder, sample.status)
-                        link.send(msg_out)
-                    # One deadline per SAMPLE: other traffic is handled but never extends it.
-                    # It runs from the send, or, when messages were already queued behind it
-                    # (a firmware in this process answers inside the call), from the first
-                    # moment nothing is queued and the bench would wait: the queue is what was
-                    # already received, so no clock is read while the answer is in it.
-                    if sent_at is not None and not attempt:
-                        deadline = sent_at + answer_timeout
-                    else:
-                        deadline = None if inbox else clock() + answer_timeout
-                    if first_sent is None and deadline is not None:
-                        first_sent = deadline - answer_timeout
-                    if not recorded:
-                        # The period's record needs nothing from the answer: made while a
-                        # board in another process or on a wire computes it (off the critical
-                        # path of stub-pty and real boards), inside the same deadline. A
-                        # failing log (a full disk) is not the link's failure: `recording`
-                        # lets it through the handler below as it is.
-                        recorded = recording = True
-                        recorder.period(k, plant.truth(), sample)
-                        recording = False
-                    late = False                  # past the deadline: take only what is queued
-                    while True:
-                        if inbox:
-                            msg = inbox.popleft()
-                        else:
-                            now = clock()
-                            if deadline is None:
-                                deadline = now + answer_timeout
-                                if first_sent is None:
-                                    first_sent = now
-                            if late:
-                                msg = link.recv(0.0)
-                                if msg is not None and answer_timeout > 0.0 and \
-                                        now > deadline + answer_timeout:
-                                    break         # a flood: this wait is lost
-                            else:
-                                wait = deadline - now
-                                if wait <= 0.0:
-                                    late = True
-                                    msg = link.recv(0.0)
-                                else:
-                                    msg = link.recv(wait)
-                            if msg is None:
-                                break
-                        t = type(msg)
-                        if t is Gates:
-                            if msg.period == k:
-                                gates = msg.gates & 0x3F    # bits 6-7 reserved: ignored (SPEC 4)
-                                break
-                            self.stale_answers += 1
-                            self._last_stale = ("GATES", msg.period)
-                        elif t is Duty:
-                            if msg.period == k:
-                                d = msg.duty
-                                duty = (d[0] / 65535.0, d[1] / 65535.0, d[2] / 65535.0)
-                                break
-                            self.stale_answers += 1
-                            self._last_stale = ("DUTY", msg.period)
-                        elif t is DutyLegs:
-                            if msg.period == k:
-                                d = msg.duty
-                                duty = (d[0] / 65535.0, d[1] / 65535.0, d[2] / 65535.0)
-                                legs = msg.leg_enable & LEGS_ALL  # reserved bits ignored (SPEC 4)
-                                break
-                            self.stale_answers += 1
-                            self._last_stale = ("DUTY_LEGS", msg.period)
-                        elif t is Telemetry:
-                            # every period's companion: straight to the recorder; named among
-                            # "others" only if the period goes unanswered
-                            record_telemetry(msg)
-                            saw_telemetry = True
-                        else:
-                            dispatch(msg)
-                            if others is None:
-                                others = set()
-                            others.add(t.__name__.upper())
-                    if gates is not None or duty is not None:
-                        break
-            except (OSError, ValueError) as exc:  # LinkError is an OSError: the line is gone
-                if recording:
-                    raise
-                if not recorded:
-                    recorder.period(k, plant.truth(), sample)
-                self._link_failed(k, exc)
-            if gates is None and duty is None:
-                self.missed_answers += 1
-                if saw_telemetry:
-                    others = (others or set()) | {"TELEMETRY"}
-                if others:
-                    self._streak_others |= others
-                if watchdog.consecutive == 0:
-                    self._streak_first = k
-                    self._streak_stale = self.stale_answers
-                why = watchdog.missed(since=first_sent)
-                self._event("missed", {"period": k, "samples_sent": sends})
-                if why is not None:
-                    self._watchdog_tripped(k, sends)
-                plant.step(None)
-            else:
-                if watchdog.consecutive:          # (answered() at 0 would change nothing)
-                    self._streak_others.clear()
-                    watchdog.answered()
-                if duty is None:
-                    if gates & (gates >> 1) & 0x15:
-                        self._shoot_through(k, gates)
-                    plant.step(gates)
-                    if self._answer_kind is not Gates:
-                        self._note_answer_kind(Gates)
-                elif legs is None:
-                    plant.step(duty=duty)
-                    if self._answer_kind is not Duty:
-                        self._note_answer_kind(Duty)
+                    run.exchange_periods = exchange_periods
+                    run.loop = (target, run.plant.sample, run.plant.truth, run.plant.step,
+                                recorder.batch_stage(), recorder.seal, run.publish_every)
+                    run.live_every = live.every if live is not None else 0
+        return run
+
+    def _run_c_periods(self, run: _Lockstep, count: int, stop: Callable[[], bool] | None):
+        """Up to `count` plain periods in the C loop: (periods done, its end state, its extra:
+        when the pending SAMPLE went, or the link's error, which fails the session here)."""
+        answer = _ANSWER_CODES.get(self._answer_kind, -1)
+        ran, state, extra = run.exchange_periods(*run.loop, count, stop, answer, run.live_every)
+        if run.direct:
+            run.tap.settle_direct()
+        if state == _LOOP_LINK_ERROR:  # period k recorded, the plant not stepped
+            self._link_failed(run.plant.period, run.tap.direct_failure(*extra))
+        return ran, state, extra
+
+    def _lockstep_period(self, run: _Lockstep, pending: bool, sent_at: float | None) -> None:
+        """One period in this loop: the mailbox's inputs, the sample, its exchange with the
+        board (the SAMPLE already sent by the C loop when `pending`), the plant's step on the
+        answer or on a miss, the per-period hook and the mailbox's publication."""
+        mailbox = run.mailbox
+        if mailbox is not None and mailbox.pending:
+            self._apply_mailbox(mailbox)
+        sample = run.plant.sample()
+        k = sample.period
+        tap = run.tap
+        if tap is not None:
+            tap.tick(k)
+            if k % run.publish_every == 0:
+                run.recorder.frames(k, tap.take_capture())
+        answer = self._exchange_period(run, k, sample, pending, sent_at)
+        if answer.gates is None and answer.duty is None:
+            self._answer_missed(run, k, answer)
+        else:
+            self._answer_taken(run, k, answer)
+        if run.on_period is not None:
+            run.on_period(k)
+        if mailbox is not None and k % run.publish_every == 0:
+            self._publish(mailbox, k)
+
+    def _exchange_period(self, run: _Lockstep, k: int, sample, pending: bool,
+                         sent_at: float | None) -> _PeriodAnswer:
+        """SAMPLE(k) out, up to run.sends times, each with its own deadline; the period's
+        record made while the board computes; what came back. A link failure fails the
+        session (the period recorded first)."""
+        answer = run.answer
+        answer.clear()
+        fast = run.fast
+        tap = run.tap
+        answer_timeout = run.answer_timeout
+        msg_out = None
+        recorded = pending
+        recording = False
+        try:
+            for attempt in range(run.sends):
+                if attempt:
+                    self.resent_samples += 1
+                if pending and not attempt:
+                    pass                      # sent by the C loop
+                elif fast is not None and not attempt and tap.fast_ready:
+                    fast(k, sample.adc_i1, sample.adc_i2, sample.adc_vdc, sample.encoder,
+                         sample.status)
                 else:
-                    self._step_duty_legs(duty, legs)
-            if on_period is not None:
-                on_period(k)
-            if mailbox is not None and k % publish_every == 0:
-                self._publish(mailbox, k)
-            done += 1
-            if stop is not None and stop():
-                return done
-        return count
+                    if msg_out is None:
+                        msg_out = Sample(k, sample.adc_i1, sample.adc_i2, sample.adc_vdc,
+                                         sample.encoder, sample.status)
+                    run.link.send(msg_out)
+                # One deadline per SAMPLE: other traffic is handled but never extends it.
+                # It runs from the send, or, when messages were already queued behind it
+                # (a firmware in this process answers inside the call), from the first
+                # moment nothing is queued and the bench would wait: the queue is what was
+                # already received, so no clock is read while the answer is in it.
+                if sent_at is not None and not attempt:
+                    deadline = sent_at + answer_timeout
+                else:
+                    deadline = None if run.inbox else run.clock() + answer_timeout
+                if answer.first_sent is None and deadline is not None:
+                    answer.first_sent = deadline - answer_timeout
+                if not recorded:
+                    # The period's record needs nothing from the answer: made while a
+                    # board in another process or on a wire computes it (off the critical
+                    # path of stub-pty and real boards), inside the same deadline. A
+                    # failing log (a full disk) is not the link's failure: `recording`
+                    # lets it through the handler below as it is.
+                    recorded = recording = True
+                    run.recorder.period(k, run.plant.truth(), sample)
+                    recording = False
+                self._take_messages(run, k, deadline, answer)
+                if answer.gates is not None or answer.duty is not None:
+                    break
+        except (OSError, ValueError) as exc:  # LinkError is an OSError: the line is gone
+            if recording:
+                raise
+            if not recorded:
+                run.recorder.period(k, run.plant.truth(), sample)
+            self._link_failed(k, exc)
+        return answer
+
+    def _take_messages(self, run: _Lockstep, k: int, deadline: float | None,
+                       answer: _PeriodAnswer) -> None:
+        """The board's messages until period k's answer or the deadline (None: it starts when
+        the queue runs empty): the answer into `answer`, stale answers counted, TELEMETRY to
+        the recorder, the rest dispatched and named."""
+        inbox = run.inbox
+        link = run.link
+        clock = run.clock
+        answer_timeout = run.answer_timeout
+        late = False                  # past the deadline: take only what is queued
+        while True:
+            if inbox:
+                msg = inbox.popleft()
+            else:
+                now = clock()
+                if deadline is None:
+                    deadline = now + answer_timeout
+                    if answer.first_sent is None:
+                        answer.first_sent = now
+                if late:
+                    msg = link.recv(0.0)
+                    if msg is not None and answer_timeout > 0.0 and \
+                            now > deadline + answer_timeout:
+                        return        # a flood: this wait is lost
+                else:
+                    wait = deadline - now
+                    if wait <= 0.0:
+                        late = True
+                        msg = link.recv(0.0)
+                    else:
+                        msg = link.recv(wait)
+                if msg is None:
+                    return
+            t = type(msg)
+            if t is Gates:
+                if msg.period == k:
+                    answer.gates = msg.gates & 0x3F    # bits 6-7 reserved: ignored (SPEC 4)
+                    return
+                self.stale_answers += 1
+                self._last_stale = ("GATES", msg.period)
+            elif t is Duty:
+                if msg.period == k:
+                    d = msg.duty
+                    answer.duty = (d[0] / 65535.0, d[1] / 65535.0, d[2] / 65535.0)
+                    return
+                self.stale_answers += 1
+                self._last_stale = ("DUTY", msg.period)
+            elif t is DutyLegs:
+                if msg.period == k:
+                    d = msg.duty
+                    answer.duty = (d[0] / 65535.0, d[1] / 65535.0, d[2] / 65535.0)
+                    answer.legs = msg.leg_enable & LEGS_ALL  # reserved bits ignored (SPEC 4)
+                    return
+                self.stale_answers += 1
+                self._last_stale = ("DUTY_LEGS", msg.period)
+            elif t is Telemetry:
+                # every period's companion: straight to the recorder; named among
+                # "others" only if the period goes unanswered
+                run.record_telemetry(msg)
+                answer.saw_telemetry = True
+            else:
+                run.dispatch(msg)
+                if answer.others is None:
+                    answer.others = set()
+                answer.others.add(t.__name__.upper())
+
+    def _answer_missed(self, run: _Lockstep, k: int, answer: _PeriodAnswer) -> None:
+        """Period k went unanswered: counted, the streak's other traffic noted for the
+        watchdog's report, the watchdog told (it may trip), the plant's gates held."""
+        self.missed_answers += 1
+        others = answer.others
+        if answer.saw_telemetry:
+            others = (others or set()) | {"TELEMETRY"}
+        if others:
+            self._streak_others |= others
+        watchdog = run.watchdog
+        if watchdog.consecutive == 0:
+            self._streak_first = k
+            self._streak_stale = self.stale_answers
+        why = watchdog.missed(since=answer.first_sent)
+        self._event("missed", {"period": k, "samples_sent": run.sends})
+        if why is not None:
+            self._watchdog_tripped(k, run.sends)
+        run.plant.step(None)
+
+    def _answer_taken(self, run: _Lockstep, k: int, answer: _PeriodAnswer) -> None:
+        """Period k's answer drives the plant (a shoot-through GATES word reported first)."""
+        watchdog = run.watchdog
+        if watchdog.consecutive:          # (answered() at 0 would change nothing)
+            self._streak_others.clear()
+            watchdog.answered()
+        gates, duty = answer.gates, answer.duty
+        if duty is None:
+            if gates & (gates >> 1) & 0x15:
+                self._shoot_through(k, gates)
+            run.plant.step(gates)
+            if self._answer_kind is not Gates:
+                self._note_answer_kind(Gates)
+        elif answer.legs is None:
+            run.plant.step(duty=duty)
+            if self._answer_kind is not Duty:
+                self._note_answer_kind(Duty)
+        else:
+            self._step_duty_legs(duty, answer.legs)
 
     def _step_duty_legs(self, duty: tuple[float, float, float], legs: int) -> None:
         """A DUTY_LEGS answer: the plant floats the legs whose bit is 0; the leg enables in

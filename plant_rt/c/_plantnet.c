@@ -53,17 +53,30 @@ static double SQRT3, S32, INV_SQRT3;
 static const double TWO_THIRDS = 2.0 / 3.0;
 static double AX[3][2];
 
+/* What the kernel knows of the plant besides its state: the Python objects' constants, in
+ * the order of MotorModel._k and Network._cfg (plant_rt/motor.py, plant_rt/circuit.py). */
 typedef struct {
     /* motor (MotorModel._k) */
-    double p, r, psim, ild, ilq, ij, b, kt;
+    double pole_pairs;
+    double resistance_ohm;        /* stator phase resistance */
+    double flux_linkage_wb;       /* permanent-magnet flux linkage (peak, per phase) */
+    double inv_ld_per_h;          /* 1 / L_d */
+    double inv_lq_per_h;          /* 1 / L_q */
+    double inv_inertia_per_kgm2;  /* 1 / J */
+    double damping_nm_per_rad_s;  /* viscous friction */
+    double torque_coeff;          /* 1.5 pole_pairs: T_e = torque_coeff (psi_d i_q - psi_q i_d) */
     /* DC link: mode 0 ideal, 1 resistive, 2 dynamic */
-    int dc_mode, unidir;
-    double src_v, rs, ic;
+    int dc_link_mode, dc_source_unidirectional; /* (unidirectional: the source takes no current) */
+    double dc_source_v;
+    double dc_source_resistance_ohm;
+    double inv_dc_capacitance_per_f; /* 1 / C (0 without a capacitor) */
     /* inverter */
-    double ud, knee;
-    /* load: torque = v0 + slope (t - t_a) + kw w over the interval */
-    int locked;
-    double kw, tl_t, tl_v0, tl_slope;
+    double device_drop_v;         /* a conducting device's forward drop */
+    double device_knee_a;         /* below this current the drop is proportional to it */
+    /* load: torque = load_torque0_nm + load_slope_nm_per_s (t - load_t0_s)
+     *               + load_nm_per_rad_s w over the interval */
+    int load_locked;
+    double load_nm_per_rad_s, load_t0_s, load_torque0_nm, load_slope_nm_per_s;
     int open_phase; /* -1: none */
 } cfg_t;
 
@@ -72,15 +85,21 @@ typedef struct {
     int tag, x;
 } ev_t;
 
+/* The general network over one interval (Network in plant_rt/circuit.py): the constants, the
+ * legs' states, and what the last RHS evaluation found (the event functions read it). */
 typedef struct {
-    cfg_t c;
-    int kinds[3];
-    int zero[3];
-    int nzero;
-    int all_zero;
-    double cur[3];
-    double vx, vdc, g_release, emf_a, emf_b, te;
-    int rel_out, rel_into;
+    cfg_t cfg;
+    int kinds[3];                /* per phase: K_H, K_L (driven), K_P, K_N (a diode), K_O (open) */
+    int zero[3];                 /* the phases held at zero current (K_O) ... */
+    int nzero;                   /* ... and their number */
+    int all_zero;                /* no current anywhere: the coast */
+    double phase_current_a[3];
+    double floating_terminal_v;  /* the one open phase's terminal voltage (nzero == 1) */
+    double dc_link_v;
+    double release_margin_v;     /* > 0: a line back-EMF overcomes the rails (release) ... */
+    double back_emf_alpha_v, back_emf_beta_v; /* (the coast's stator voltage) */
+    double torque_nm;            /* the electromagnetic torque */
+    int release_out_phase, release_into_phase; /* ... between these two phases */
     int knee_side[3];
     long events, overflows;
 } net_t;
@@ -89,25 +108,25 @@ typedef struct {
 
 static double dc_voltage(const cfg_t *c, double v, double idc)
 {
-    if (c->dc_mode == 2) {
+    if (c->dc_link_mode == 2) {
         return v;
     }
-    if (c->dc_mode == 1) {
-        return c->src_v - c->rs * idc;
+    if (c->dc_link_mode == 1) {
+        return c->dc_source_v - c->dc_source_resistance_ohm * idc;
     }
-    return c->src_v;
+    return c->dc_source_v;
 }
 
 static double dc_dv_dt(const cfg_t *c, double v, double idc)
 {
-    if (c->dc_mode != 2) {
+    if (c->dc_link_mode != 2) {
         return 0.0;
     }
-    double i = (c->src_v - v) / c->rs;
-    if (c->unidir && i < 0.0) {
+    double i = (c->dc_source_v - v) / c->dc_source_resistance_ohm;
+    if (c->dc_source_unidirectional && i < 0.0) {
         i = 0.0;
     }
-    return (i - idc) * c->ic;
+    return (i - idc) * c->inv_dc_capacitance_per_f;
 }
 
 /* ------------------------------------------------------------------ leg states */
@@ -140,18 +159,18 @@ static void configure(net_t *n, const int kinds[3])
 
 static void project_phase(const net_t *n, int x, double *y)
 {
-    const cfg_t *m = &n->c;
-    double e = m->p * y[3];
+    const cfg_t *m = &n->cfg;
+    double e = m->pole_pairs * y[3];
     double c = cos(e), s = sin(e);
     double ex0 = AX[x][0], ex1 = AX[x][1];
-    double i_d = (c * y[0] + s * y[1] - m->psim) * m->ild;
-    double i_q = (c * y[1] - s * y[0]) * m->ilq;
+    double i_d = (c * y[0] + s * y[1] - m->flux_linkage_wb) * m->inv_ld_per_h;
+    double i_q = (c * y[1] - s * y[0]) * m->inv_lq_per_h;
     double ia = c * i_d - s * i_q;
     double ib = s * i_d + c * i_q;
     double ix = ex0 * ia + ex1 * ib;
     double rd = c * ex0 + s * ex1;
     double rq = c * ex1 - s * ex0;
-    double delta = -ix / (rd * rd * m->ild + rq * rq * m->ilq);
+    double delta = -ix / (rd * rd * m->inv_ld_per_h + rq * rq * m->inv_lq_per_h);
     y[0] += delta * ex0;
     y[1] += delta * ex1;
 }
@@ -161,11 +180,11 @@ static void project(const net_t *n, double *y)
     if (n->nzero == 0) {
         return;
     }
-    double e = n->c.p * y[3];
+    double e = n->cfg.pole_pairs * y[3];
     double c = cos(e), s = sin(e);
     if (n->all_zero) {
-        y[0] = n->c.psim * c;
-        y[1] = n->c.psim * s;
+        y[0] = n->cfg.flux_linkage_wb * c;
+        y[1] = n->cfg.flux_linkage_wb * s;
         return;
     }
     project_phase(n, n->zero[0], y);
@@ -176,29 +195,29 @@ static void project(const net_t *n, double *y)
 /* out: dpsi_a, dpsi_b, dw, dtheta, dv_dc, u_alpha, u_beta, i_dc */
 static void rhs(net_t *n, double t, const double *y, double *out)
 {
-    const cfg_t *m = &n->c;
+    const cfg_t *m = &n->cfg;
     double pa = y[0], pb = y[1], w = y[2], th = y[3], v = y[4];
-    double e = m->p * th;
+    double e = m->pole_pairs * th;
     double c = cos(e);
     double s = sin(e);
-    double we = m->p * w;
+    double we = m->pole_pairs * w;
     double dpa, dpb, te, idc, vdc, va, vb;
     if (n->all_zero) {
-        va = -we * m->psim * s;
-        vb = we * m->psim * c;
+        va = -we * m->flux_linkage_wb * s;
+        vb = we * m->flux_linkage_wb * c;
         dpa = va;
         dpb = vb;
         te = 0.0;
         idc = 0.0;
         vdc = dc_voltage(m, v, 0.0);
-        n->cur[0] = n->cur[1] = n->cur[2] = 0.0;
-        n->emf_a = va;
-        n->emf_b = vb;
+        n->phase_current_a[0] = n->phase_current_a[1] = n->phase_current_a[2] = 0.0;
+        n->back_emf_alpha_v = va;
+        n->back_emf_beta_v = vb;
     } else {
         double pd = c * pa + s * pb;
         double pq = c * pb - s * pa;
-        double i_d = (pd - m->psim) * m->ild;
-        double i_q = pq * m->ilq;
+        double i_d = (pd - m->flux_linkage_wb) * m->inv_ld_per_h;
+        double i_q = pq * m->inv_lq_per_h;
         double ia = c * i_d - s * i_q;
         double ib = s * i_d + c * i_q;
         double cur[3] = {ia, -0.5 * ia + S32 * ib, -0.5 * ia - S32 * ib};
@@ -209,14 +228,14 @@ static void rhs(net_t *n, double t, const double *y, double *out)
             }
         }
         vdc = dc_voltage(m, v, idc);
-        double ud = m->ud;
+        double ud = m->device_drop_v;
         double vt[3] = {0.0, 0.0, 0.0};
         for (int x = 0; x < 3; x++) {
             int k = n->kinds[x];
             if (k == K_H || k == K_L) {
                 double drop = 0.0;
                 if (ud != 0.0) {
-                    double z = cur[x] / m->knee;
+                    double z = cur[x] / m->device_knee_a;
                     drop = ud * (z > 1.0 ? 1.0 : z < -1.0 ? -1.0 : z);
                 }
                 vt[x] = (k == K_H ? vdc : 0.0) - drop;
@@ -230,30 +249,30 @@ static void rhs(net_t *n, double t, const double *y, double *out)
         vb = (vt[1] - vt[2]) * INV_SQRT3;
         if (n->nzero) {
             double ex0 = AX[n->zero[0]][0], ex1 = AX[n->zero[0]][1];
-            double did = (c * va + s * vb - m->r * i_d + we * pq) * m->ild;
-            double diq = (c * vb - s * va - m->r * i_q - we * pd) * m->ilq;
+            double did = (c * va + s * vb - m->resistance_ohm * i_d + we * pq) * m->inv_ld_per_h;
+            double diq = (c * vb - s * va - m->resistance_ohm * i_q - we * pd) * m->inv_lq_per_h;
             double rd = c * ex0 + s * ex1;
             double rq = c * ex1 - s * ex0;
             double g0 = rd * did + rq * diq + we * (ex1 * ia - ex0 * ib);
-            double vx = -g0 / (TWO_THIRDS * (rd * rd * m->ild + rq * rq * m->ilq));
+            double vx = -g0 / (TWO_THIRDS * (rd * rd * m->inv_ld_per_h + rq * rq * m->inv_lq_per_h));
             va += TWO_THIRDS * ex0 * vx;
             vb += TWO_THIRDS * ex1 * vx;
-            n->vx = vx;
+            n->floating_terminal_v = vx;
         }
-        dpa = va - m->r * ia;
-        dpb = vb - m->r * ib;
-        te = m->kt * (pd * i_q - pq * i_d);
-        n->cur[0] = cur[0];
-        n->cur[1] = cur[1];
-        n->cur[2] = cur[2];
+        dpa = va - m->resistance_ohm * ia;
+        dpb = vb - m->resistance_ohm * ib;
+        te = m->torque_coeff * (pd * i_q - pq * i_d);
+        n->phase_current_a[0] = cur[0];
+        n->phase_current_a[1] = cur[1];
+        n->phase_current_a[2] = cur[2];
     }
-    n->vdc = vdc;
-    n->te = te;
+    n->dc_link_v = vdc;
+    n->torque_nm = te;
     double dw;
-    if (m->locked) {
+    if (m->load_locked) {
         dw = 0.0;
     } else {
-        dw = (te - m->b * w - ((m->tl_v0 + m->tl_slope * (t - m->tl_t)) + m->kw * w)) * m->ij;
+        dw = (te - m->damping_nm_per_rad_s * w - ((m->load_torque0_nm + m->load_slope_nm_per_s * (t - m->load_t0_s)) + m->load_nm_per_rad_s * w)) * m->inv_inertia_per_kgm2;
     }
     out[0] = dpa;
     out[1] = dpb;
@@ -267,7 +286,7 @@ static void rhs(net_t *n, double t, const double *y, double *out)
 
 static void release(net_t *n, double va, double vb, double vdc)
 {
-    double ud = n->c.ud;
+    double ud = n->cfg.device_drop_v;
     double up[3], lo[3];
     for (int x = 0; x < 3; x++) {
         double ex = AX[x][0] * va + AX[x][1] * vb;
@@ -284,7 +303,7 @@ static void release(net_t *n, double va, double vb, double vdc)
     static const int pairs[6][2] = {{0, 1}, {0, 2}, {1, 0}, {1, 2}, {2, 0}, {2, 1}};
     double best = -INFINITY;
     int bo = 0, bi = 1;
-    int cut = n->c.open_phase;
+    int cut = n->cfg.open_phase;
     for (int j = 0; j < 6; j++) {
         int x = pairs[j][0], yy = pairs[j][1];
         if (x == cut || yy == cut) {
@@ -297,45 +316,45 @@ static void release(net_t *n, double va, double vb, double vdc)
             bi = yy;
         }
     }
-    n->g_release = best;
-    n->rel_out = bo;
-    n->rel_into = bi;
+    n->release_margin_v = best;
+    n->release_out_phase = bo;
+    n->release_into_phase = bi;
 }
 
 static int event_values(net_t *n, ev_t *out)
 {
     int k = 0;
     if (n->all_zero) {
-        release(n, n->emf_a, n->emf_b, n->vdc);
-        out[0].g = n->g_release;
+        release(n, n->back_emf_alpha_v, n->back_emf_beta_v, n->dc_link_v);
+        out[0].g = n->release_margin_v;
         out[0].tag = T_REL;
         out[0].x = 0;
         return 1;
     }
     for (int x = 0; x < 3; x++) {
         if (n->kinds[x] == K_P) {
-            out[k].g = -n->cur[x];
+            out[k].g = -n->phase_current_a[x];
             out[k].tag = T_I;
             out[k++].x = x;
         } else if (n->kinds[x] == K_N) {
-            out[k].g = n->cur[x];
+            out[k].g = n->phase_current_a[x];
             out[k].tag = T_I;
             out[k++].x = x;
         }
     }
-    if (n->nzero && n->zero[0] != n->c.open_phase) {
+    if (n->nzero && n->zero[0] != n->cfg.open_phase) {
         int x = n->zero[0];
-        out[k].g = n->vx - n->vdc - n->c.ud;
+        out[k].g = n->floating_terminal_v - n->dc_link_v - n->cfg.device_drop_v;
         out[k].tag = T_HI;
         out[k++].x = x;
-        out[k].g = -n->c.ud - n->vx;
+        out[k].g = -n->cfg.device_drop_v - n->floating_terminal_v;
         out[k].tag = T_LO;
         out[k++].x = x;
     }
-    if (n->c.ud != 0.0) {
+    if (n->cfg.device_drop_v != 0.0) {
         for (int x = 0; x < 3; x++) {
             if ((n->kinds[x] == K_H || n->kinds[x] == K_L) && n->knee_side[x]) {
-                out[k].g = n->knee_side[x] * (n->c.knee - fabs(n->cur[x]));
+                out[k].g = n->knee_side[x] * (n->cfg.device_knee_a - fabs(n->phase_current_a[x]));
                 out[k].tag = T_K;
                 out[k++].x = x;
             }
@@ -346,9 +365,9 @@ static int event_values(net_t *n, ev_t *out)
 
 static void note_knee_sides(net_t *n)
 {
-    if (n->c.ud != 0.0) {
+    if (n->cfg.device_drop_v != 0.0) {
         for (int x = 0; x < 3; x++) {
-            n->knee_side[x] = fabs(n->cur[x]) > n->c.knee ? 1 : -1;
+            n->knee_side[x] = fabs(n->phase_current_a[x]) > n->cfg.device_knee_a ? 1 : -1;
         }
     }
 }
@@ -379,7 +398,7 @@ static void rk4(net_t *n, double t, const double *y, double h, const double *k1,
     for (int i = 0; i < 3; i++) {
         quad[i] = h6 * (k1[5 + i] + 2.0 * (k2[5 + i] + k3[5 + i]) + k4[5 + i]);
     }
-    if (n->c.locked) {
+    if (n->cfg.load_locked) {
         out[2] = 0.0;
     }
 }
@@ -411,11 +430,11 @@ static void transition(net_t *n, double t, int tag, int x, double *y)
         ev_t g[MAX_G];
         rhs(n, t, y, scratch);
         event_values(n, g);
-        if (kinds[n->rel_out] == K_O) {
-            kinds[n->rel_out] = K_N;
+        if (kinds[n->release_out_phase] == K_O) {
+            kinds[n->release_out_phase] = K_N;
         }
-        if (kinds[n->rel_into] == K_O) {
-            kinds[n->rel_into] = K_P;
+        if (kinds[n->release_into_phase] == K_O) {
+            kinds[n->release_into_phase] = K_P;
         }
     }
     configure(n, kinds);
@@ -510,17 +529,17 @@ static int rk4_steps(double cn, long *steps)
 static int coast(net_t *n, double t0, double t1, const double *y, long steps, double *acc,
                  double *out)
 {
-    const cfg_t *m = &n->c;
+    const cfg_t *m = &n->cfg;
     double pa0 = y[0], pb0 = y[1], w = y[2], th = y[3], v = y[4];
     double h = (t1 - t0) / (double)steps;
     /* load.segment(t0): the interval's segment starts at tl_t */
-    double v0 = m->tl_v0 + m->tl_slope * (t0 - m->tl_t);
-    double slope = m->tl_slope;
-    double kw = m->kw, b = m->b, ij = m->ij;
+    double v0 = m->load_torque0_nm + m->load_slope_nm_per_s * (t0 - m->load_t0_s);
+    double slope = m->load_slope_nm_per_s;
+    double kw = m->load_nm_per_rad_s, b = m->damping_nm_per_rad_s, ij = m->inv_inertia_per_kgm2;
     for (long i = 0; i < steps; i++) {
         double t = (double)i * h;
         double k1w, k2w, k3w, k4w;
-        if (m->locked) {
+        if (m->load_locked) {
             k1w = k2w = k3w = k4w = 0.0;
             w = 0.0;
         } else {
@@ -534,7 +553,7 @@ static int coast(net_t *n, double t0, double t1, const double *y, long steps, do
         }
         th += h / 6.0 * (w + 2.0 * (w + 0.5 * h * k1w) + 2.0 * (w + 0.5 * h * k2w) + w + h * k3w);
         w += h / 6.0 * (k1w + 2.0 * (k2w + k3w) + k4w);
-        if (m->dc_mode == 2) {
+        if (m->dc_link_mode == 2) {
             double q1 = dc_dv_dt(m, v, 0.0);
             double q2 = dc_dv_dt(m, v + 0.5 * h * q1, 0.0);
             double q3 = dc_dv_dt(m, v + 0.5 * h * q2, 0.0);
@@ -542,16 +561,16 @@ static int coast(net_t *n, double t0, double t1, const double *y, long steps, do
             v += h / 6.0 * (q1 + 2.0 * (q2 + q3) + q4);
         }
     }
-    double e = m->p * th;
-    out[0] = m->psim * cos(e);
-    out[1] = m->psim * sin(e);
+    double e = m->pole_pairs * th;
+    out[0] = m->flux_linkage_wb * cos(e);
+    out[1] = m->flux_linkage_wb * sin(e);
     out[2] = w;
     out[3] = th;
     out[4] = v;
     double scratch[8];
     rhs(n, t1, out, scratch);
-    release(n, n->emf_a, n->emf_b, n->vdc);
-    if (n->g_release > 0.0) {
+    release(n, n->back_emf_alpha_v, n->back_emf_beta_v, n->dc_link_v);
+    if (n->release_margin_v > 0.0) {
         return 0;
     }
     acc[0] += out[0] - pa0;
@@ -654,7 +673,7 @@ typedef struct {
 static void advance_general(const cfg_t *m, double *st, double va, double vb, double h, long n,
                             double tl0, double tl_slope, double bw)
 {
-    double p = m->p, r = m->r, psim = m->psim, ild = m->ild, ilq = m->ilq, ij = m->ij, kt = m->kt;
+    double p = m->pole_pairs, r = m->resistance_ohm, psim = m->flux_linkage_wb, ild = m->inv_ld_per_h, ilq = m->inv_lq_per_h, ij = m->inv_inertia_per_kgm2, kt = m->torque_coeff;
     double pa = st[0], pb = st[1], w = st[2], th = st[3];
     double h2 = 0.5 * h;
     double h6 = h / 6.0;
@@ -782,7 +801,7 @@ static inline void rk4_spm_step(double p, double ril, double rk, double kti, dou
 static void advance_spm(const cfg_t *m, double *st, double va, double vb, double h, long n,
                         double tl0, double tl_slope, double bw)
 {
-    double p = m->p, r = m->r, psim = m->psim, ild = m->ild, ij = m->ij, kt = m->kt;
+    double p = m->pole_pairs, r = m->resistance_ohm, psim = m->flux_linkage_wb, ild = m->inv_ld_per_h, ij = m->inv_inertia_per_kgm2, kt = m->torque_coeff;
     double pa = st[0], pb = st[1], w = st[2], th = st[3];
     double h2 = 0.5 * h;
     double t = 0.0;
@@ -808,7 +827,7 @@ static int advance_pieces(const cfg_t *m, int spm, double *st, const piece_t *pi
                           int npieces, double h_max, double tl0, double tl_slope, double bw,
                           double *q_out)
 {
-    double p = m->p, r = m->r, psim = m->psim, ild = m->ild, ij = m->ij, kt = m->kt;
+    double p = m->pole_pairs, r = m->resistance_ohm, psim = m->flux_linkage_wb, ild = m->inv_ld_per_h, ij = m->inv_inertia_per_kgm2, kt = m->torque_coeff;
     double pa = st[0], pb = st[1], w = st[2], th = st[3];
     double t = 0.0, q = 0.0;
     double ril = r * ild;
@@ -870,7 +889,7 @@ static void currents_at(double e, double psim, double ild, double ilq, double pa
 static void currents(const cfg_t *m, double pa, double pb, double th, double *ia, double *ib)
 {
     double i[4];
-    currents_at(m->p * th, m->psim, m->ild, m->ilq, pa, pb, i);
+    currents_at(m->pole_pairs * th, m->flux_linkage_wb, m->inv_ld_per_h, m->inv_lq_per_h, pa, pb, i);
     *ia = i[0];
     *ib = i[1];
 }
@@ -917,34 +936,34 @@ static int get_cfg(PyObject *motor, PyObject *cfg, cfg_t *c)
     if (get_doubles(motor, k, 8, "motor constants") < 0 || get_doubles(cfg, f, NCFG, "cfg") < 0) {
         return -1;
     }
-    c->p = k[0];
-    c->r = k[1];
-    c->psim = k[2];
-    c->ild = k[3];
-    c->ilq = k[4];
-    c->ij = k[5];
-    c->b = k[6];
-    c->kt = k[7];
+    c->pole_pairs = k[0];
+    c->resistance_ohm = k[1];
+    c->flux_linkage_wb = k[2];
+    c->inv_ld_per_h = k[3];
+    c->inv_lq_per_h = k[4];
+    c->inv_inertia_per_kgm2 = k[5];
+    c->damping_nm_per_rad_s = k[6];
+    c->torque_coeff = k[7];
     /* the ranges below before the conversions to int (undefined for NaN or out of int's range);
      * accepted are the values whose truncation is in range, as before */
     if (!(f[0] > -1.0 && f[0] < 3.0) || !(f[12] > -2.0 && f[12] < 3.0)) {
         PyErr_SetString(PyExc_ValueError, "cfg: dc_mode or open_phase out of range");
         return -1;
     }
-    c->dc_mode = (int)f[0];
-    c->src_v = f[1];
-    c->rs = f[2];
-    c->ic = f[3];
-    c->unidir = f[4] != 0.0;
-    c->ud = f[5];
-    c->knee = f[6];
-    c->locked = f[7] != 0.0;
-    c->kw = f[8];
-    c->tl_t = f[9];
-    c->tl_v0 = f[10];
-    c->tl_slope = f[11];
+    c->dc_link_mode = (int)f[0];
+    c->dc_source_v = f[1];
+    c->dc_source_resistance_ohm = f[2];
+    c->inv_dc_capacitance_per_f = f[3];
+    c->dc_source_unidirectional = f[4] != 0.0;
+    c->device_drop_v = f[5];
+    c->device_knee_a = f[6];
+    c->load_locked = f[7] != 0.0;
+    c->load_nm_per_rad_s = f[8];
+    c->load_t0_s = f[9];
+    c->load_torque0_nm = f[10];
+    c->load_slope_nm_per_s = f[11];
     c->open_phase = (int)f[12];
-    if (c->dc_mode < 0 || c->dc_mode > 2 || c->open_phase < -1 || c->open_phase > 2) {
+    if (c->dc_link_mode < 0 || c->dc_link_mode > 2 || c->open_phase < -1 || c->open_phase > 2) {
         PyErr_SetString(PyExc_ValueError, "cfg: dc_mode or open_phase out of range");
         return -1;
     }
@@ -987,7 +1006,7 @@ static PyObject *mod_integrate(PyObject *self, PyObject *const *args, Py_ssize_t
     memset(&n, 0, sizeof n);
     double t0, t1, h_max, y[5], acc[3];
     int kinds[3];
-    if (get_cfg(args[0], args[1], &n.c) < 0 || get_kinds(args[2], kinds) < 0 ||
+    if (get_cfg(args[0], args[1], &n.cfg) < 0 || get_kinds(args[2], kinds) < 0 ||
         get_double(args[3], &t0) < 0 || get_double(args[4], &t1) < 0 ||
         get_doubles(args[5], y, 5, "y") < 0 || get_double(args[6], &h_max) < 0) {
         return NULL;
@@ -1015,7 +1034,7 @@ static PyObject *mod_integrate(PyObject *self, PyObject *const *args, Py_ssize_t
         PyList_SetItem(acc_list, i, f); /* steals f */
     }
     return Py_BuildValue("[ddddd](iii)lld", y[0], y[1], y[2], y[3], y[4], n.kinds[0], n.kinds[1],
-                         n.kinds[2], n.events, n.overflows, n.vdc);
+                         n.kinds[2], n.events, n.overflows, n.dc_link_v);
 }
 
 /* Network.begin: the phase states for an interval with the given leg states (H, L or O).
@@ -1028,16 +1047,16 @@ static void begin(net_t *n, double t, double *y, const int legs[3], int *last)
     }
     *last = code;
     double ia, ib;
-    double e = n->c.p * y[3];
+    double e = n->cfg.pole_pairs * y[3];
     double c = cos(e), s = sin(e);
-    double i_d = (c * y[0] + s * y[1] - n->c.psim) * n->c.ild;
-    double i_q = (c * y[1] - s * y[0]) * n->c.ilq;
+    double i_d = (c * y[0] + s * y[1] - n->cfg.flux_linkage_wb) * n->cfg.inv_ld_per_h;
+    double i_q = (c * y[1] - s * y[0]) * n->cfg.inv_lq_per_h;
     ia = c * i_d - s * i_q;
     ib = s * i_d + c * i_q;
     double cur[3] = {ia, -0.5 * ia + S32 * ib, -0.5 * ia - S32 * ib};
     int kinds[3];
     for (int x = 0; x < 3; x++) {
-        if (x == n->c.open_phase) {
+        if (x == n->cfg.open_phase) {
             kinds[x] = K_O;
         } else if (legs[x] != K_O) {
             kinds[x] = legs[x];
@@ -1077,11 +1096,11 @@ static int period_args(PyObject *const *args, const char *name, period_args_t *p
     if (last_l == -1 && PyErr_Occurred()) {
         return -1;
     }
-    if (get_cfg(args[0], args[1], &pa->n.c) < 0 || get_kinds(args[2], kinds) < 0 ||
+    if (get_cfg(args[0], args[1], &pa->n.cfg) < 0 || get_kinds(args[2], kinds) < 0 ||
         get_double(args[5], &pa->t0) < 0 || get_double(args[6], &pa->T) < 0 ||
         get_doubles(args[7], pa->y, 5, "y") < 0 || get_double(args[8], &pa->h_max) < 0 ||
         get_double(args[10], &pa->seg_t) < 0 || get_double(args[11], &pa->seg_v0) < 0 ||
-        get_double(args[12], &pa->slope) < 0 || get_double(args[13], &pa->n.vdc) < 0) {
+        get_double(args[12], &pa->slope) < 0 || get_double(args[13], &pa->n.dc_link_v) < 0) {
         return -1;
     }
     pa->intervals = args[4];
@@ -1142,9 +1161,9 @@ static int network_interval(period_args_t *pa, double a, double b, double v0, co
 {
     net_t *n = &pa->n;
     double ta = pa->t0 + a;
-    n->c.tl_t = ta;
-    n->c.tl_v0 = v0;
-    n->c.tl_slope = pa->slope;
+    n->cfg.load_t0_s = ta;
+    n->cfg.load_torque0_nm = v0;
+    n->cfg.load_slope_nm_per_s = pa->slope;
     begin(n, ta, pa->y, legs, &pa->last);
     return net_integrate(n, ta, pa->t0 + b, pa->y, pa->h_max, pa->acc);
 }
@@ -1191,7 +1210,7 @@ static PyObject *mod_period(PyObject *self, PyObject *const *args, Py_ssize_t na
     }
     const net_t *n = &pa.n;
     return Py_BuildValue("[ddddd](iii)illdi", pa.y[0], pa.y[1], pa.y[2], pa.y[3], pa.y[4], n->kinds[0],
-                         n->kinds[1], n->kinds[2], pa.last, n->events, n->overflows, n->vdc, ran);
+                         n->kinds[1], n->kinds[2], pa.last, n->events, n->overflows, n->dc_link_v, ran);
 }
 
 /* A driven word's vector as Plant._vectors holds it: (va, vb, ga, gb, legs); 0 none (None), 1 read,
@@ -1236,7 +1255,7 @@ static int fast_advance(const cfg_t *m, int spm, double *y, const double v[4], d
     y[3] = st[3];
     acc[0] += v[0] * length;
     acc[1] += v[1] * length;
-    acc[2] += (v[2] * (v[0] * length - (y[0] - pa0)) + v[3] * (v[1] * length - (y[1] - pb0))) / m->r;
+    acc[2] += (v[2] * (v[0] * length - (y[0] - pa0)) + v[3] * (v[1] * length - (y[1] - pb0))) / m->resistance_ohm;
     return 0;
 }
 
@@ -1420,7 +1439,7 @@ static int run_intervals(period_args_t *pa, const struct fast_path *f, int *net_
                 return -1;
             }
             if (got) {
-                if (fast_advance(&n->c, f->spm, y, v, length, pa->h_max, v0, pa->slope, f->bw, pa->acc) < 0) {
+                if (fast_advance(&n->cfg, f->spm, y, v, length, pa->h_max, v0, pa->slope, f->bw, pa->acc) < 0) {
                     return -1;
                 }
                 took_driven(pa, driven, net_dirty);
@@ -1428,7 +1447,7 @@ static int run_intervals(period_args_t *pa, const struct fast_path *f, int *net_
             }
             /* _diode_interval: every open leg's diode by its current's sign, tried as that word */
             double ia, ib;
-            currents(&n->c, y[0], y[1], y[3], &ia, &ib);
+            currents(&n->cfg, y[0], y[1], y[3], &ia, &ib);
             double cur[3] = {ia, -0.5 * ia + S32 * ib, -0.5 * ia - S32 * ib};
             long equivalent = 0;
             int diode = 1;
@@ -1456,10 +1475,10 @@ static int run_intervals(period_args_t *pa, const struct fast_path *f, int *net_
                 }
                 double trial[5] = {y[0], y[1], y[2], y[3], y[4]};
                 double part[3] = {0.0, 0.0, 0.0};
-                if (fast_advance(&n->c, f->spm, trial, v, length, pa->h_max, v0, pa->slope, f->bw, part) < 0) {
+                if (fast_advance(&n->cfg, f->spm, trial, v, length, pa->h_max, v0, pa->slope, f->bw, part) < 0) {
                     return -1;
                 }
-                currents(&n->c, trial[0], trial[1], trial[3], &ia, &ib);
+                currents(&n->cfg, trial[0], trial[1], trial[3], &ia, &ib);
                 double after[3] = {ia, -0.5 * ia + S32 * ib, -0.5 * ia - S32 * ib};
                 for (int x = 0; x < 3; x++) {
                     if (legs[x] == K_O && (after[x] > 0.0) != (cur[x] > 0.0)) {
@@ -1514,7 +1533,7 @@ static PyObject *mod_fast_period(PyObject *self, PyObject *const *args, Py_ssize
     const net_t *n = &pa.n;
     return Py_BuildValue("[ddddd](iii)illdO", pa.y[0], pa.y[1], pa.y[2], pa.y[3], pa.y[4],
                          n->kinds[0], n->kinds[1], n->kinds[2], pa.last, n->events, n->overflows,
-                         n->vdc, net_dirty ? Py_True : Py_False);
+                         n->dc_link_v, net_dirty ? Py_True : Py_False);
 }
 
 PyDoc_STRVAR(settle_doc,
@@ -1533,7 +1552,7 @@ static PyObject *mod_settle(PyObject *self, PyObject *const *args, Py_ssize_t na
     memset(&n, 0, sizeof n);
     double t, y[5];
     int kinds[3];
-    if (get_cfg(args[0], args[1], &n.c) < 0 || get_kinds(args[2], kinds) < 0 ||
+    if (get_cfg(args[0], args[1], &n.cfg) < 0 || get_kinds(args[2], kinds) < 0 ||
         get_double(args[3], &t) < 0 || get_doubles(args[4], y, 5, "y") < 0) {
         return NULL;
     }
@@ -1546,125 +1565,185 @@ static PyObject *mod_settle(PyObject *self, PyObject *const *args, Py_ssize_t na
                          n.kinds[2], n.events);
 }
 
-/* Plant._leg_period's numerics from the windows on. Returns 0 (the period is not one the
- * constant-vector form may take: the caller uses the general network), 1 (done: st, out),
- * -1 (more edges than this code holds: the caller uses the Python version), -2 with an
- * exception (rk4_steps; st unchanged). */
-static int leg_period(const cfg_t *m, double lind, int spm, double T, double wins[6][MAX_WIN][2],
-                      const int nwin[6], double ud, double knee, double vdc, double *st,
-                      double h_max, double v0, double slope, double bw, double *out, int *h_end)
+/* The working state of one leg_period call, handed by pointer from step to step. */
+typedef struct {
+    int need[3];            /* legs whose current must keep its sign over the period */
+    int nneed;
+    double signs[3];        /* that sign (+1, -1; 0 for a leg that needs none) */
+    double cur0[3];         /* phase currents at the period's start (A), once needed */
+    int have_cur0;
+    int h0;                 /* legs high at t = 0 (bit x: leg x) */
+    double tog_t[MAX_TOG];  /* the legs' toggles: time (s) ... */
+    int tog_b[MAX_TOG];     /* ... and the leg's bit */
+    int ntog;
+    piece_t pieces[MAX_TOG + 1];
+    double edges[MAX_TOG + 2]; /* the pieces' start times (s), then T */
+    int np;
+    double ua_int, ub_int;  /* the period's integral of the stator voltage (V s) */
+    int h_end;              /* the leg-high pattern at the period's end */
+} leg_work_t;
+
+/* The on-time (s) of a leg's high and low windows in *on; 0 when they overlap (a shoot-through
+ * the constant-vector form does not model), else 1. */
+static int leg_on_time(const double (*hi)[2], int nhi, const double (*lo)[2], int nlo,
+                       double *on)
 {
-    int need[3], nneed = 0;
-    double signs[3] = {0.0, 0.0, 0.0};
-    double cur0[3] = {0.0, 0.0, 0.0};
-    int have_cur0 = 0;
-    int h0 = 0;
-    double tog_t[MAX_TOG];
-    int tog_b[MAX_TOG];
-    int ntog = 0;
+    double sum = 0.0;
+    for (int i = 0; i < nhi; i++) {
+        double a = hi[i][0], b = hi[i][1];
+        sum += b - a;
+        for (int k = 0; k < nlo; k++) {
+            if (a < lo[k][1] && lo[k][0] < b) {
+                return 0;
+            }
+        }
+    }
+    for (int k = 0; k < nlo; k++) {
+        sum += lo[k][1] - lo[k][0];
+    }
+    *on = sum;
+    return 1;
+}
+
+/* The gaps between a leg's low windows over [0, T] in high[]: where a leg with negative current
+ * sits at the high rail through its upper diode. Returns their number. */
+static int low_window_gaps(const double (*lo)[2], int nlo, double T, double high[][2])
+{
+    int nh = 0;
+    double t = 0.0;
+    for (int k = 0; k < nlo; k++) {
+        if (lo[k][0] > t) {
+            high[nh][0] = t;
+            high[nh][1] = lo[k][0];
+            nh++;
+        }
+        t = lo[k][1];
+    }
+    if (t < T) {
+        high[nh][0] = t;
+        high[nh][1] = T;
+        nh++;
+    }
+    return nh;
+}
+
+/* Leg x conducts through a diode part of the period: notes the sign its current (at the
+ * period's start) must keep. 0 when the form may not take it (a general motor, a current
+ * within the knee), else 1. */
+static int note_leg_sign(leg_work_t *w, const cfg_t *m, int spm, const double *st, int x,
+                         double ud, double knee)
+{
+    if (!spm) {
+        return 0;
+    }
+    if (!w->have_cur0) {
+        double ia, ib;
+        currents(m, st[0], st[1], st[3], &ia, &ib);
+        w->cur0[0] = ia;
+        w->cur0[1] = -0.5 * ia + S32 * ib;
+        w->cur0[2] = -0.5 * ia - S32 * ib;
+        w->have_cur0 = 1;
+    }
+    double ix = w->cur0[x];
+    double thr = ud > 0.0 ? knee : 0.0;
+    if (fabs(ix) <= thr + ZERO_CURRENT_A) {
+        return 0;
+    }
+    w->signs[x] = ix > 0.0 ? 1.0 : -1.0;
+    w->need[w->nneed++] = x;
+    return 1;
+}
+
+/* The high windows' edges of one leg as toggles (an edge at 0 sets the leg high from the
+ * start, one at T is no toggle). -1 when they do not fit, else 0. */
+static int add_leg_toggles(leg_work_t *w, const double (*hi)[2], int nhi, double T, int bit)
+{
+    for (int i = 0; i < nhi; i++) {
+        double a = hi[i][0], b = hi[i][1];
+        if (w->ntog + 2 > MAX_TOG) {
+            return -1;
+        }
+        if (a <= 0.0) {
+            w->h0 |= bit;
+        } else {
+            w->tog_t[w->ntog] = a;
+            w->tog_b[w->ntog++] = bit;
+        }
+        if (b < T) {
+            w->tog_t[w->ntog] = b;
+            w->tog_b[w->ntog++] = bit;
+        }
+    }
+    return 0;
+}
+
+/* Every leg's toggles from its switch windows, with the signs the diode-conducting legs need.
+ * 1, or 0 (not a constant-vector period), or -1 (too many edges). */
+static int leg_toggles(leg_work_t *w, const cfg_t *m, int spm, double T,
+                       double wins[6][MAX_WIN][2], const int nwin[6], double ud, double knee,
+                       const double *st)
+{
     for (int x = 0; x < 3; x++) {
-        double (*hi)[2] = wins[2 * x];
-        double (*lo)[2] = wins[2 * x + 1];
+        const double (*hi)[2] = (const double (*)[2])wins[2 * x];
+        const double (*lo)[2] = (const double (*)[2])wins[2 * x + 1];
         int nhi = nwin[2 * x], nlo = nwin[2 * x + 1];
         double high[MAX_WIN + 1][2];
-        double on = 0.0;
-        for (int i = 0; i < nhi; i++) {
-            double a = hi[i][0], b = hi[i][1];
-            on += b - a;
-            for (int k = 0; k < nlo; k++) {
-                if (a < lo[k][1] && lo[k][0] < b) {
-                    return 0;
-                }
-            }
-        }
-        for (int k = 0; k < nlo; k++) {
-            on += lo[k][1] - lo[k][0];
+        double on;
+        if (!leg_on_time(hi, nhi, lo, nlo, &on)) {
+            return 0;
         }
         if (ud > 0.0 || on < T * (1.0 - 1e-12)) {
-            if (!spm) {
+            if (!note_leg_sign(w, m, spm, st, x, ud, knee)) {
                 return 0;
             }
-            if (!have_cur0) {
-                double ia, ib;
-                currents(m, st[0], st[1], st[3], &ia, &ib);
-                cur0[0] = ia;
-                cur0[1] = -0.5 * ia + S32 * ib;
-                cur0[2] = -0.5 * ia - S32 * ib;
-                have_cur0 = 1;
-            }
-            double ix = cur0[x];
-            double thr = ud > 0.0 ? knee : 0.0;
-            if (fabs(ix) <= thr + ZERO_CURRENT_A) {
-                return 0;
-            }
-            signs[x] = ix > 0.0 ? 1.0 : -1.0;
-            need[nneed++] = x;
-            if (ix < 0.0) {
-                int nh = 0;
-                double t = 0.0;
-                for (int k = 0; k < nlo; k++) {
-                    if (lo[k][0] > t) {
-                        high[nh][0] = t;
-                        high[nh][1] = lo[k][0];
-                        nh++;
-                    }
-                    t = lo[k][1];
-                }
-                if (t < T) {
-                    high[nh][0] = t;
-                    high[nh][1] = T;
-                    nh++;
-                }
-                hi = high;
-                nhi = nh;
+            if (w->cur0[x] < 0.0) {
+                nhi = low_window_gaps(lo, nlo, T, high);
+                hi = (const double (*)[2])high;
             }
         }
-        int bit = 1 << x;
-        for (int i = 0; i < nhi; i++) {
-            double a = hi[i][0], b = hi[i][1];
-            if (ntog + 2 > MAX_TOG) {
-                return -1;
-            }
-            if (a <= 0.0) {
-                h0 |= bit;
-            } else {
-                tog_t[ntog] = a;
-                tog_b[ntog++] = bit;
-            }
-            if (b < T) {
-                tog_t[ntog] = b;
-                tog_b[ntog++] = bit;
-            }
+        if (add_leg_toggles(w, hi, nhi, T, 1 << x) < 0) {
+            return -1;
         }
     }
-    /* sort (time, bit) as Python sorts the tuples */
-    for (int i = 1; i < ntog; i++) {
-        double tt = tog_t[i];
-        int bb = tog_b[i];
+    return 1;
+}
+
+/* Sorts the toggles by (time, bit) as Python sorts the tuples (insertion sort: few, nearly
+ * in order). */
+static void sort_toggles(leg_work_t *w)
+{
+    for (int i = 1; i < w->ntog; i++) {
+        double tt = w->tog_t[i];
+        int bb = w->tog_b[i];
         int j = i - 1;
-        while (j >= 0 && (tog_t[j] > tt || (tog_t[j] == tt && tog_b[j] > bb))) {
-            tog_t[j + 1] = tog_t[j];
-            tog_b[j + 1] = tog_b[j];
+        while (j >= 0 && (w->tog_t[j] > tt || (w->tog_t[j] == tt && w->tog_b[j] > bb))) {
+            w->tog_t[j + 1] = w->tog_t[j];
+            w->tog_b[j + 1] = w->tog_b[j];
             j--;
         }
-        tog_t[j + 1] = tt;
-        tog_b[j + 1] = bb;
+        w->tog_t[j + 1] = tt;
+        w->tog_b[j + 1] = bb;
     }
-    double off_a = -ud * (2.0 * signs[0] - signs[1] - signs[2]) / 3.0;
-    double off_b = -ud * (signs[1] - signs[2]) / SQRT3;
-    piece_t pieces[MAX_TOG + 1];
-    double edges[MAX_TOG + 2];
+}
+
+/* The constant-vector pieces between the toggles: each one's length, stator voltage (the
+ * leg pattern's vector at vdc plus the diode legs' drop) and DC-link current gain; the
+ * voltage's integral over the period and the final leg pattern. */
+static void build_pieces(leg_work_t *w, double T, double vdc, double ud)
+{
+    double off_a = -ud * (2.0 * w->signs[0] - w->signs[1] - w->signs[2]) / 3.0;
+    double off_b = -ud * (w->signs[1] - w->signs[2]) / SQRT3;
     int np = 0, ne = 0;
-    edges[ne++] = 0.0;
+    w->edges[ne++] = 0.0;
     double t = 0.0;
-    int h = h0;
+    int h = w->h0;
     double ua_int = 0.0, ub_int = 0.0;
-    for (int i = 0; i <= ntog; i++) {
-        double when = i < ntog ? tog_t[i] : T;
-        if (i == ntog && !(t < T)) {
+    for (int i = 0; i <= w->ntog; i++) {
+        double when = i < w->ntog ? w->tog_t[i] : T;
+        if (i == w->ntog && !(t < T)) {
             break;
         }
-        if (when > t || i == ntog) {
+        if (when > t || i == w->ntog) {
             /* _LEG_UNITS[h] */
             double ua = ((double)(2 * (h & 1)) - (double)(h >> 1 & 1) - (double)(h >> 2 & 1)) / 3.0;
             double ub = ((double)(h >> 1 & 1) - (double)(h >> 2 & 1)) / SQRT3;
@@ -1677,72 +1756,108 @@ static int leg_period(const cfg_t *m, double lind, int spm, double T, double win
             }
             double va = ua * vdc + off_a;
             double vb = ub * vdc + off_b;
-            pieces[np].len = when - t;
-            pieces[np].va = va;
-            pieces[np].vb = vb;
-            pieces[np].ga = ga;
-            pieces[np].gb = gb;
+            w->pieces[np].len = when - t;
+            w->pieces[np].va = va;
+            w->pieces[np].vb = vb;
+            w->pieces[np].ga = ga;
+            w->pieces[np].gb = gb;
             np++;
             ua_int += va * (when - t);
             ub_int += vb * (when - t);
-            edges[ne++] = when;
+            w->edges[ne++] = when;
             t = when;
         }
-        if (i < ntog) {
-            h ^= tog_b[i];
+        if (i < w->ntog) {
+            h ^= w->tog_b[i];
         }
     }
+    w->np = np;
+    w->ua_int = ua_int;
+    w->ub_int = ub_int;
+    w->h_end = h;
+}
+
+/* Plant._signs_hold: every diode leg's current kept its sign over the period, with the
+ * bound on the straight line's error between the pieces' edges. 1 if so, else 0. */
+static int signs_hold(const leg_work_t *w, const cfg_t *m, double lind, double T, double ud,
+                      double knee, double vdc, const double y0[4], const double *st, double v0,
+                      double slope, double bw)
+{
+    double ia, ib;
+    currents(m, st[0], st[1], st[3], &ia, &ib);
+    double cur1[3] = {ia, -0.5 * ia + S32 * ib, -0.5 * ia - S32 * ib};
+    double u_max = 2.0 / 3.0 * (vdc + 2.0 * ud);
+    double w_max = fabs(y0[2]) > fabs(st[2]) ? fabs(y0[2]) : fabs(st[2]);
+    double ia0, ib0;
+    currents(m, y0[0], y0[1], y0[3], &ia0, &ib0);
+    double i0 = hypot(ia0, ib0), i1 = hypot(ia, ib);
+    double i_max = i0 > i1 ? i0 : i1;
+    i_max += T * (u_max + m->pole_pairs * w_max * m->flux_linkage_wb) / lind + 1e-3;
+    double load_max = fabs(v0) + fabs(slope) * T;
+    double alpha_e = m->pole_pairs * (m->torque_coeff * m->flux_linkage_wb * i_max + bw * w_max + load_max) * m->inv_inertia_per_kgm2;
+    double we = m->pole_pairs * w_max + alpha_e * T;
+    double bound = (m->resistance_ohm / lind * (u_max + m->resistance_ohm * i_max + we * m->flux_linkage_wb) +
+                    (we * we + alpha_e) * m->flux_linkage_wb) * T * T / 8.0;
+    double thr = lind * (ud > 0.0 ? knee : 0.0) + bound;
+    const piece_t *pieces = w->pieces;
+    for (int k = 0; k < w->nneed; k++) {
+        int x = w->need[k];
+        double ex0 = AX[x][0], ex1 = AX[x][1];
+        double s = w->signs[x];
+        double vx = 0.0, vx_end = 0.0;
+        for (int i = 0; i < w->np; i++) {
+            vx_end += (ex0 * pieces[i].va + ex1 * pieces[i].vb) * pieces[i].len;
+        }
+        double yy0 = lind * w->cur0[x];
+        double dy = lind * cur1[x] - vx_end - yy0;
+        for (int i = 0; i < w->np; i++) {
+            if (s * (vx + yy0 + dy * w->edges[i] / T) <= thr) {
+                return 0;
+            }
+            vx += (ex0 * pieces[i].va + ex1 * pieces[i].vb) * pieces[i].len;
+        }
+        if (s * lind * cur1[x] <= thr) {
+            return 0;
+        }
+    }
+    return 1;
+}
+
+/* Plant._leg_period's numerics from the windows on. Returns 0 (the period is not one the
+ * constant-vector form may take: the caller uses the general network), 1 (done: st, out),
+ * -1 (more edges than this code holds: the caller uses the Python version), -2 with an
+ * exception (rk4_steps; st unchanged). */
+static int leg_period(const cfg_t *m, double lind, int spm, double T, double wins[6][MAX_WIN][2],
+                      const int nwin[6], double ud, double knee, double vdc, double *st,
+                      double h_max, double v0, double slope, double bw, double *out, int *h_end)
+{
+    leg_work_t w;
+    w.nneed = 0;
+    w.signs[0] = w.signs[1] = w.signs[2] = 0.0;
+    w.cur0[0] = w.cur0[1] = w.cur0[2] = 0.0;
+    w.have_cur0 = 0;
+    w.h0 = 0;
+    w.ntog = 0;
+    int r = leg_toggles(&w, m, spm, T, wins, nwin, ud, knee, st);
+    if (r <= 0) {
+        return r;
+    }
+    sort_toggles(&w);
+    build_pieces(&w, T, vdc, ud);
     double y0[4] = {st[0], st[1], st[2], st[3]};
     double q;
-    if (advance_pieces(m, spm, st, pieces, np, h_max, v0, slope, bw, &q) < 0) {
+    if (advance_pieces(m, spm, st, w.pieces, w.np, h_max, v0, slope, bw, &q) < 0) {
         memcpy(st, y0, sizeof y0);
         return -2;
     }
-    if (nneed) {
-        /* Plant._signs_hold */
-        double ia, ib;
-        currents(m, st[0], st[1], st[3], &ia, &ib);
-        double cur1[3] = {ia, -0.5 * ia + S32 * ib, -0.5 * ia - S32 * ib};
-        double u_max = 2.0 / 3.0 * (vdc + 2.0 * ud);
-        double w_max = fabs(y0[2]) > fabs(st[2]) ? fabs(y0[2]) : fabs(st[2]);
-        double ia0, ib0;
-        currents(m, y0[0], y0[1], y0[3], &ia0, &ib0);
-        double i0 = hypot(ia0, ib0), i1 = hypot(ia, ib);
-        double i_max = i0 > i1 ? i0 : i1;
-        i_max += T * (u_max + m->p * w_max * m->psim) / lind + 1e-3;
-        double load_max = fabs(v0) + fabs(slope) * T;
-        double alpha_e = m->p * (m->kt * m->psim * i_max + bw * w_max + load_max) * m->ij;
-        double we = m->p * w_max + alpha_e * T;
-        double bound = (m->r / lind * (u_max + m->r * i_max + we * m->psim) +
-                        (we * we + alpha_e) * m->psim) * T * T / 8.0;
-        double thr = lind * (ud > 0.0 ? knee : 0.0) + bound;
-        for (int k = 0; k < nneed; k++) {
-            int x = need[k];
-            double ex0 = AX[x][0], ex1 = AX[x][1];
-            double s = signs[x];
-            double vx = 0.0, vx_end = 0.0;
-            for (int i = 0; i < np; i++) {
-                vx_end += (ex0 * pieces[i].va + ex1 * pieces[i].vb) * pieces[i].len;
-            }
-            double yy0 = lind * cur0[x];
-            double dy = lind * cur1[x] - vx_end - yy0;
-            for (int i = 0; i < np; i++) {
-                if (s * (vx + yy0 + dy * edges[i] / T) <= thr) {
-                    memcpy(st, y0, sizeof y0);
-                    return 0;
-                }
-                vx += (ex0 * pieces[i].va + ex1 * pieces[i].vb) * pieces[i].len;
-            }
-            if (s * lind * cur1[x] <= thr) {
-                memcpy(st, y0, sizeof y0);
-                return 0;
-            }
-        }
+    if (w.nneed && !signs_hold(&w, m, lind, T, ud, knee, vdc, y0, st, v0, slope, bw)) {
+        memcpy(st, y0, sizeof y0);
+        return 0;
     }
-    out[0] = ua_int;
-    out[1] = ub_int;
+    out[0] = w.ua_int;
+    out[1] = w.ub_int;
     out[2] = q;
-    *h_end = h;
+    *h_end = w.h_end;
     return 1;
 }
 
@@ -1767,14 +1882,14 @@ static PyObject *mod_leg_period(PyObject *self, PyObject *const *args, Py_ssize_
     if (get_doubles(args[0], k, 8, "motor constants") < 0) {
         return NULL;
     }
-    m.p = k[0];
-    m.r = k[1];
-    m.psim = k[2];
-    m.ild = k[3];
-    m.ilq = k[4];
-    m.ij = k[5];
-    m.b = k[6];
-    m.kt = k[7];
+    m.pole_pairs = k[0];
+    m.resistance_ohm = k[1];
+    m.flux_linkage_wb = k[2];
+    m.inv_ld_per_h = k[3];
+    m.inv_lq_per_h = k[4];
+    m.inv_inertia_per_kgm2 = k[5];
+    m.damping_nm_per_rad_s = k[6];
+    m.torque_coeff = k[7];
     double ld;
     if (get_double(args[1], &ld) < 0) {
         return NULL;
@@ -1865,14 +1980,14 @@ static PyObject *mod_advance(PyObject *self, PyObject *const *args, Py_ssize_t n
     if (n == -1 && PyErr_Occurred()) {
         return NULL;
     }
-    m.p = k[0];
-    m.r = k[1];
-    m.psim = k[2];
-    m.ild = k[3];
-    m.ilq = k[4];
-    m.ij = k[5];
-    m.b = k[6];
-    m.kt = k[7];
+    m.pole_pairs = k[0];
+    m.resistance_ohm = k[1];
+    m.flux_linkage_wb = k[2];
+    m.inv_ld_per_h = k[3];
+    m.inv_lq_per_h = k[4];
+    m.inv_inertia_per_kgm2 = k[5];
+    m.damping_nm_per_rad_s = k[6];
+    m.torque_coeff = k[7];
     double st[4] = {f[0], f[1], f[2], f[3]};
     if (spm) {
         advance_spm(&m, st, f[4], f[5], f[6], n, f[8], f[9], f[10]);
@@ -2814,14 +2929,14 @@ static PyObject *mod_duty_period(PyObject *self, PyObject *const *args, Py_ssize
     }
     cfg_t m;
     memset(&m, 0, sizeof m);
-    m.p = c[0];
-    m.r = c[1];
-    m.psim = c[2];
-    m.ild = c[3];
-    m.ilq = c[4];
-    m.ij = c[5];
-    m.b = c[6];
-    m.kt = c[7];
+    m.pole_pairs = c[0];
+    m.resistance_ohm = c[1];
+    m.flux_linkage_wb = c[2];
+    m.inv_ld_per_h = c[3];
+    m.inv_lq_per_h = c[4];
+    m.inv_inertia_per_kgm2 = c[5];
+    m.damping_nm_per_rad_s = c[6];
+    m.torque_coeff = c[7];
     double ld = c[8], T = c[10], delay_s = c[11], td = c[12], ud = c[13], knee = c[14];
     double h_max = c[15];
     int spm = c[9] != 0.0;

@@ -8,7 +8,7 @@
  * step). Built with BOARD_QEMU_ICOUNT, cycles_init() measures instructions per
  * tick with a loop of known length, and the counter below counts instructions:
  * exact and repeatable at shift >= 6, where a tick is shorter than an
- * instruction (hil/qemu_board.py runs shift=7).
+ * instruction (hil/links/qemu.py runs shift=7).
  */
 #ifndef BOARD_CYCLES_H
 #define BOARD_CYCLES_H

@@ -1563,6 +1563,380 @@ static PyObject *loop_result(Py_ssize_t done, int state, PyObject *extra)
     return r;
 }
 
+/* exchange_periods' state, handed by pointer from step to step. */
+typedef struct {
+    PyObject *sample, *truth, *step, *stop;  /* the plant's and caller's callables */
+    Py_ssize_t publish_every, count;
+    long answer;                 /* 0 GATES, 1 DUTY */
+    unsigned long live_every;    /* 0: no live view */
+    /* the board: in-process (exchange, fw) or a descriptor (fd, the timeouts, partial) */
+    int by_fd;
+    fw_exchange_fn exchange;
+    void *fw;
+    int fd;
+    double answer_timeout_s, write_timeout_s;
+    PyObject *partial;
+    PyObject *capture_out, *capture_in, *inbox;
+    EncoderObject *enc;
+    DecoderObject *dec;
+    Py_buffer counts_view;
+    int64_t *counts;
+    stage_t st;
+    answer_queue q;
+    PyObject *spill;
+    PyObject *extra;             /* the third value returned: when the SAMPLE went, or the I/O error */
+    Py_ssize_t done;
+    int state;
+    int failed;
+} period_loop_t;
+
+/* exchange_periods' arguments into L (the counts and the stage's buffers taken). -1 with an
+ * exception (nothing held), else 0. */
+static int loop_args(period_loop_t *L, PyObject *const *args)
+{
+    PyObject *target = args[0];
+    L->sample = args[1];
+    L->truth = args[2];
+    L->step = args[3];
+    L->stop = args[8];
+    Py_ssize_t tlen = PyTuple_CheckExact(target) ? PyTuple_GET_SIZE(target) : -1;
+    if (tlen != 8 && tlen != 10) {
+        PyErr_SetString(PyExc_TypeError, "exchange_periods: target is 8 (in-process) or 10 (descriptor) values");
+        return -1;
+    }
+    L->publish_every = PyLong_AsSsize_t(args[6]);
+    L->count = PyLong_AsSsize_t(args[7]);
+    L->answer = PyLong_AsLong(args[9]);
+    L->live_every = PyLong_AsUnsignedLong(args[10]);
+    if (PyErr_Occurred()) {
+        return -1;
+    }
+    if (L->publish_every < 1 || L->count < 0) {
+        PyErr_SetString(PyExc_ValueError, "exchange_periods: publish_every >= 1, count >= 0");
+        return -1;
+    }
+    /* in-process: (exchange, fw, encoder, decoder, capture_out, capture_in, counts, inbox);
+     * descriptor: (fd, answer_timeout_s, write_timeout_s, encoder, decoder, capture_out,
+     *              capture_in, counts, inbox, partial) */
+    L->by_fd = tlen == 10;
+    L->exchange = NULL;
+    L->fw = NULL;
+    L->fd = -1;
+    L->answer_timeout_s = 0.0;
+    L->write_timeout_s = 0.0;
+    L->partial = NULL;
+    if (L->by_fd) {
+        L->fd = (int)PyLong_AsLong(PyTuple_GET_ITEM(target, 0));
+        L->answer_timeout_s = PyFloat_AsDouble(PyTuple_GET_ITEM(target, 1));
+        L->write_timeout_s = PyFloat_AsDouble(PyTuple_GET_ITEM(target, 2));
+        L->partial = PyTuple_GET_ITEM(target, 9);
+        if (PyErr_Occurred()) {
+            return -1;
+        }
+        if (L->fd < 0 || !PyByteArray_CheckExact(L->partial)) {
+            PyErr_SetString(PyExc_TypeError, "exchange_periods: a descriptor target needs fd >= 0 and a "
+                                             "bytearray for the partial frame");
+            return -1;
+        }
+    } else {
+        L->exchange = (fw_exchange_fn)(uintptr_t)PyLong_AsVoidPtr(PyTuple_GET_ITEM(target, 0));
+        L->fw = PyLong_AsVoidPtr(PyTuple_GET_ITEM(target, 1));
+        if (PyErr_Occurred()) {
+            return -1;
+        }
+    }
+    if (!L->by_fd && (L->exchange == NULL || L->fw == NULL)) {
+        PyErr_SetString(PyExc_ValueError, "exchange_periods: null exchange function or instance");
+        return -1;
+    }
+    Py_ssize_t base = L->by_fd ? 3 : 2;
+    L->capture_out = PyTuple_GET_ITEM(target, base + 2);
+    L->capture_in = PyTuple_GET_ITEM(target, base + 3);
+    L->inbox = PyTuple_GET_ITEM(target, base + 5);
+    if (codec_args("exchange_periods", &PyTuple_GET_ITEM(target, base), &L->counts_view) < 0) {
+        return -1;
+    }
+    L->counts = (int64_t *)L->counts_view.buf;
+    if (stage_take(&L->st, args[4], args[5]) < 0) {
+        PyBuffer_Release(&L->counts_view);
+        return -1;
+    }
+    L->enc = (EncoderObject *)PyTuple_GET_ITEM(target, base);
+    L->dec = (DecoderObject *)PyTuple_GET_ITEM(target, base + 1);
+    return 0;
+}
+
+/* What inbox already holds comes first, as the loop in Python takes it: TELEMETRY objects
+ * only (anything else is the caller's to handle). 0 queued (inbox emptied), 1 the caller's
+ * (LOOP_HANDED), -1 with an exception. */
+static int inbox_to_queue(period_loop_t *L)
+{
+    PyTypeObject *telemetry_cls = classes[HIL_MSG_TELEMETRY].cls;
+    answer_queue *q = &L->q;
+    Py_ssize_t held = PyObject_Length(L->inbox);
+    if (held <= 0) {
+        return held < 0 ? -1 : 0;
+    }
+    PyObject *items = held > LOOP_QUEUE / 2 ? NULL : PySequence_List(L->inbox);
+    int all_telemetry = items != NULL;
+    for (Py_ssize_t i = 0; all_telemetry && i < held; i++) {
+        all_telemetry = Py_TYPE(PyList_GET_ITEM(items, i)) == telemetry_cls;
+    }
+    if (!all_telemetry) {
+        Py_XDECREF(items);
+        return PyErr_Occurred() ? -1 : 1;
+    }
+    PyObject *r = PyObject_CallMethod(L->inbox, "clear", NULL);
+    if (r == NULL) {
+        Py_DECREF(items);
+        return -1;
+    }
+    Py_DECREF(r);
+    for (Py_ssize_t i = 0; i < held; i++) {
+        PyObject *o = PyList_GET_ITEM(items, i);
+        unsigned long period = PyLong_AsUnsignedLong(SLOT(o, classes[HIL_MSG_TELEMETRY].off[0]));
+        if (PyErr_Occurred()) {             /* (not a period: its row says so later) */
+            PyErr_Clear();
+            period = 1u;
+        }
+        q->obj[q->n] = Py_NewRef(o);
+        q->m[q->n].type = HIL_MSG_TELEMETRY;
+        q->m[q->n].u.telemetry.period = (uint32_t)period;
+        q->n++;
+    }
+    Py_DECREF(items);
+    return 0;
+}
+
+/* The loop stops on the link's error: (errno, what) is returned, or the exception if that
+ * tuple cannot be made. */
+static void loop_link_error(period_loop_t *L, int io_errno, const char *io_what)
+{
+    L->extra = Py_BuildValue("(is)", io_errno, io_what);
+    L->state = L->extra == NULL ? LOOP_DONE : LOOP_LINK_ERROR;
+    L->failed = L->extra == NULL;
+}
+
+/* The SAMPLE s out: over the descriptor written (a write failure in *io_what, *sent_at when it
+ * went), in process through the board's exchange (its answers queued). -1 with an exception. */
+static int send_sample(period_loop_t *L, PyObject *s, double *sent_at, int *io_errno,
+                       const char **io_what)
+{
+    if (L->by_fd) {
+        uint8_t frame[HIL_MAX_ENCODED_FRAME];
+        int n_frame = encode_sample_frame("exchange_periods", &PyTuple_GET_ITEM(s, 0), L->enc,
+                                          L->capture_out, frame);
+        if (n_frame < 0) {
+            return -1;
+        }
+        if (fd_write_all(L->fd, frame, (size_t)n_frame, L->write_timeout_s) < 0) {
+            *io_errno = errno;
+            *io_what = *io_errno == ETIMEDOUT ? "write timed out (nobody reading?)" : "write failed";
+        } else {
+            L->counts[0] += 1;
+            L->counts[2] += n_frame;
+        }
+        *sent_at = monotonic_s();
+        return 0;
+    }
+    return exchange_frames("exchange_periods", L->exchange, L->fw, L->enc, L->dec, L->capture_out,
+                           L->capture_in, &PyTuple_GET_ITEM(s, 0), L->counts, &L->q, &L->spill,
+                           other_threads());
+}
+
+/* Period k's answer from the queue's front (take_answers' values); over a descriptor, read as
+ * the answers come within the SAMPLE's one deadline (a read failure in *io_what). */
+static int await_answer(period_loop_t *L, unsigned long k, double sent_at, long *gates,
+                        uint16_t duty[3], int *io_errno, const char **io_what)
+{
+    int taken = L->spill != NULL ? 2 : take_answers(&L->q, k, L->answer, L->live_every, &L->st, gates, duty);
+    while (L->by_fd && taken == 0) {
+        double left = sent_at + L->answer_timeout_s - monotonic_s();
+        int ready_now = left > 0.0 ? fd_wait(L->fd, POLLIN, left) : 0;
+        if (ready_now <= 0) {
+            if (ready_now < 0) {
+                *io_errno = errno;
+                *io_what = "read failed";
+            }
+            break;                          /* the deadline: the caller's late handling */
+        }
+        uint8_t buf[4096];
+        ssize_t got;
+        Py_BEGIN_ALLOW_THREADS
+        got = read(L->fd, buf, sizeof buf);
+        Py_END_ALLOW_THREADS
+        if (got < 0 && (errno == EAGAIN || errno == EWOULDBLOCK || errno == EINTR)) {
+            continue;
+        }
+        if (got <= 0) {
+            *io_errno = got < 0 ? errno : 0;
+            *io_what = got == 0 || *io_errno == EIO ? "the other end closed the line" : "read failed";
+            break;
+        }
+        if (fd_take_in(buf, (size_t)got, L->partial, L->dec, L->capture_in, L->counts, &L->q, &L->spill) < 0) {
+            return -1;
+        }
+        taken = L->spill != NULL ? 2 : take_answers(&L->q, k, L->answer, L->live_every, &L->st, gates, duty);
+    }
+    return taken;
+}
+
+/* The plant's step with the board's answer: step(duty=(d0, d1, d2)) in [0, 1], or step(gates).
+ * -1 with an exception. */
+static int step_plant(period_loop_t *L, long gates, const uint16_t duty[3])
+{
+    PyObject *r;
+    if (L->answer == 1) {
+        PyObject *d = Py_BuildValue("(ddd)", duty[0] / 65535.0, duty[1] / 65535.0, duty[2] / 65535.0);
+        if (d == NULL) {
+            return -1;
+        }
+        PyObject *kw = PyTuple_Pack(1, str_duty);
+        PyObject *call_args[1] = {d};
+        r = kw == NULL ? NULL : PyObject_Vectorcall(L->step, call_args, 0, kw);
+        Py_XDECREF(kw);
+        Py_DECREF(d);
+    } else {
+        PyObject *g = PyLong_FromLong(gates);
+        r = g == NULL ? NULL : PyObject_CallOneArg(L->step, g);
+        Py_XDECREF(g);
+    }
+    if (r == NULL) {
+        return -1;
+    }
+    Py_DECREF(r);
+    return 0;
+}
+
+/* stop() asked for the loop's end: 1 yes, 0 no (or no stop), -1 with an exception. */
+static int stop_asked(PyObject *stop)
+{
+    if (stop == Py_None) {
+        return 0;
+    }
+    PyObject *r = PyObject_CallNoArgs(stop);
+    if (r == NULL) {
+        return -1;
+    }
+    int yes = PyObject_IsTrue(r);
+    Py_DECREF(r);
+    return yes;
+}
+
+/* Keeps the queue's room at its front. */
+static void queue_compact(answer_queue *q)
+{
+    if (q->head > 0) {
+        memmove(&q->m[0], &q->m[q->head], (size_t)(q->n - q->head) * sizeof q->m[0]);
+        memmove(&q->obj[0], &q->obj[q->head], (size_t)(q->n - q->head) * sizeof q->obj[0]);
+        q->n -= q->head;
+        q->head = 0;
+    }
+}
+
+/* One period: sample, SAMPLE out, its record, the answer, the plant's step. 1 to go on; 0 the
+ * loop ends (L->state, or L->failed with an exception). */
+static int loop_period(period_loop_t *L)
+{
+    if (L->counts[4] != 0) {                   /* closed: the caller's path raises */
+        L->state = LOOP_HANDED;
+        return 0;
+    }
+    PyObject *s = PyObject_CallNoArgs(L->sample);
+    if (s == NULL) {
+        L->failed = 1;
+        return 0;
+    }
+    if (!PyTuple_Check(s) || PyTuple_GET_SIZE(s) != 6) {
+        Py_DECREF(s);
+        PyErr_SetString(PyExc_TypeError, "exchange_periods: sample() must return 6 values");
+        L->failed = 1;
+        return 0;
+    }
+    unsigned long k = PyLong_AsUnsignedLong(PyTuple_GET_ITEM(s, 0));
+    if (PyErr_Occurred()) {
+        Py_DECREF(s);
+        L->failed = 1;
+        return 0;
+    }
+    if (k % (unsigned long)L->publish_every == 0u || (L->live_every > 0u && k % L->live_every == 0u)) {
+        Py_DECREF(s);
+        L->state = LOOP_HANDED;
+        return 0;
+    }
+    double sent_at = 0.0;
+    int io_errno = 0;
+    const char *io_what = NULL;
+    /* over a descriptor the record is made while the board computes */
+    if (send_sample(L, s, &sent_at, &io_errno, &io_what) < 0) {
+        Py_DECREF(s);
+        L->failed = 1;
+        return 0;
+    }
+    int rc = record_period(&L->st, s, L->truth);
+    Py_DECREF(s);
+    if (rc < 0) {
+        L->failed = 1;
+        return 0;
+    }
+    if (io_what != NULL) {
+        loop_link_error(L, io_errno, io_what);
+        return 0;
+    }
+    long gates = -1;
+    uint16_t duty[3] = {0, 0, 0};
+    int taken = await_answer(L, k, sent_at, &gates, duty, &io_errno, &io_what);
+    if (taken < 0) {
+        L->failed = 1;
+        return 0;
+    }
+    if (io_what != NULL) {
+        loop_link_error(L, io_errno, io_what);
+        return 0;
+    }
+    if (taken != 1) {
+        L->state = LOOP_PENDING;
+        if (L->by_fd && (L->extra = PyFloat_FromDouble(sent_at)) == NULL) {
+            L->failed = 1;
+        }
+        return 0;
+    }
+    if (step_plant(L, gates, duty) < 0) {
+        L->failed = 1;
+        return 0;
+    }
+    L->done++;
+    int stop = stop_asked(L->stop);
+    if (stop != 0) {
+        L->failed = stop < 0;
+        L->state = stop > 0 ? LOOP_STOPPED : L->state;
+        return 0;
+    }
+    queue_compact(&L->q);
+    return 1;
+}
+
+/* The loop's end: what is left of the queue goes back to inbox (the state the Python loop
+ * leaves); (done, state, extra), or NULL with the loop's exception. */
+static PyObject *loop_finish(period_loop_t *L)
+{
+    if (L->failed) {
+        Py_XDECREF(L->extra);
+        PyObject *et, *ev, *tb;
+        PyErr_Fetch(&et, &ev, &tb);
+        if (queue_to_inbox(&L->q, L->spill, L->inbox) < 0) {
+            PyErr_Clear();
+        }
+        PyErr_Restore(et, ev, tb);
+        return NULL;
+    }
+    if (queue_to_inbox(&L->q, L->spill, L->inbox) < 0) {
+        Py_XDECREF(L->extra);
+        return NULL;
+    }
+    return loop_result(L->done, L->state, L->extra);
+}
+
 static PyObject *mod_exchange_periods(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     (void)self;
@@ -1573,306 +1947,27 @@ static PyObject *mod_exchange_periods(PyObject *self, PyObject *const *args, Py_
     if (!ready()) {
         return NULL;
     }
-    PyObject *target = args[0], *sample = args[1], *truth = args[2], *step = args[3];
-    PyObject *stage_arg = args[4], *seal = args[5], *stop = args[8];
-    Py_ssize_t tlen = PyTuple_CheckExact(target) ? PyTuple_GET_SIZE(target) : -1;
-    if (tlen != 8 && tlen != 10) {
-        PyErr_SetString(PyExc_TypeError, "exchange_periods: target is 8 (in-process) or 10 (descriptor) values");
+    period_loop_t L;
+    if (loop_args(&L, args) < 0) {
         return NULL;
     }
-    Py_ssize_t publish_every = PyLong_AsSsize_t(args[6]);
-    Py_ssize_t count = PyLong_AsSsize_t(args[7]);
-    long answer = PyLong_AsLong(args[9]);
-    unsigned long live_every = PyLong_AsUnsignedLong(args[10]);
-    if (PyErr_Occurred()) {
-        return NULL;
+    L.q.head = L.q.n = 0;
+    L.spill = NULL;
+    L.extra = NULL;
+    L.done = 0;
+    L.state = LOOP_DONE;
+    L.failed = 0;
+    int held = inbox_to_queue(&L);
+    if (held != 0) {
+        PyBuffer_Release(&L.counts_view);
+        stage_release(&L.st);
+        return held < 0 ? NULL : loop_result(0, LOOP_HANDED, NULL);
     }
-    if (publish_every < 1 || count < 0) {
-        PyErr_SetString(PyExc_ValueError, "exchange_periods: publish_every >= 1, count >= 0");
-        return NULL;
+    while (L.done < L.count && loop_period(&L)) {
     }
-    /* in-process: (exchange, fw, encoder, decoder, capture_out, capture_in, counts, inbox);
-     * descriptor: (fd, answer_timeout_s, write_timeout_s, encoder, decoder, capture_out,
-     *              capture_in, counts, inbox, partial) */
-    int by_fd = tlen == 10;
-    fw_exchange_fn exchange = NULL;
-    void *fw = NULL;
-    int fd = -1;
-    double answer_timeout_s = 0.0, write_timeout_s = 0.0;
-    PyObject *partial = NULL;
-    if (by_fd) {
-        fd = (int)PyLong_AsLong(PyTuple_GET_ITEM(target, 0));
-        answer_timeout_s = PyFloat_AsDouble(PyTuple_GET_ITEM(target, 1));
-        write_timeout_s = PyFloat_AsDouble(PyTuple_GET_ITEM(target, 2));
-        partial = PyTuple_GET_ITEM(target, 9);
-        if (PyErr_Occurred()) {
-            return NULL;
-        }
-        if (fd < 0 || !PyByteArray_CheckExact(partial)) {
-            PyErr_SetString(PyExc_TypeError, "exchange_periods: a descriptor target needs fd >= 0 and a "
-                                             "bytearray for the partial frame");
-            return NULL;
-        }
-    } else {
-        exchange = (fw_exchange_fn)(uintptr_t)PyLong_AsVoidPtr(PyTuple_GET_ITEM(target, 0));
-        fw = PyLong_AsVoidPtr(PyTuple_GET_ITEM(target, 1));
-        if (PyErr_Occurred()) {
-            return NULL;
-        }
-    }
-    if (!by_fd && (exchange == NULL || fw == NULL)) {
-        PyErr_SetString(PyExc_ValueError, "exchange_periods: null exchange function or instance");
-        return NULL;
-    }
-    Py_ssize_t base = by_fd ? 3 : 2;
-    PyObject *capture_out = PyTuple_GET_ITEM(target, base + 2), *capture_in = PyTuple_GET_ITEM(target, base + 3);
-    PyObject *inbox = PyTuple_GET_ITEM(target, base + 5);
-    Py_buffer counts_view;
-    if (codec_args("exchange_periods", &PyTuple_GET_ITEM(target, base), &counts_view) < 0) {
-        return NULL;
-    }
-    int64_t *counts = (int64_t *)counts_view.buf;
-    stage_t st;
-    if (stage_take(&st, stage_arg, seal) < 0) {
-        PyBuffer_Release(&counts_view);
-        return NULL;
-    }
-    EncoderObject *enc = (EncoderObject *)PyTuple_GET_ITEM(target, base);
-    DecoderObject *dec = (DecoderObject *)PyTuple_GET_ITEM(target, base + 1);
-    PyTypeObject *telemetry_cls = classes[HIL_MSG_TELEMETRY].cls;
-
-    answer_queue q;
-    q.head = q.n = 0;
-    PyObject *spill = NULL;
-    PyObject *extra = NULL;      /* the third value returned: when the SAMPLE went, or the I/O error */
-    Py_ssize_t done = 0;
-    int state = LOOP_DONE;
-    int failed = 0;
-
-    /* What inbox already holds comes first, as the loop in Python takes it: TELEMETRY objects
-     * only (anything else is the caller's to handle). */
-    Py_ssize_t held = PyObject_Length(inbox);
-    if (held < 0) {
-        PyBuffer_Release(&counts_view);
-        stage_release(&st);
-        return NULL;
-    }
-    if (held > 0) {
-        PyObject *items = held > LOOP_QUEUE / 2 ? NULL : PySequence_List(inbox);
-        int all_telemetry = items != NULL;
-        for (Py_ssize_t i = 0; all_telemetry && i < held; i++) {
-            all_telemetry = Py_TYPE(PyList_GET_ITEM(items, i)) == telemetry_cls;
-        }
-        if (!all_telemetry) {
-            Py_XDECREF(items);
-            PyBuffer_Release(&counts_view);
-            stage_release(&st);
-            return PyErr_Occurred() ? NULL : loop_result(0, LOOP_HANDED, NULL);
-        }
-        PyObject *r = PyObject_CallMethod(inbox, "clear", NULL);
-        if (r == NULL) {
-            Py_DECREF(items);
-            PyBuffer_Release(&counts_view);
-            stage_release(&st);
-            return NULL;
-        }
-        Py_DECREF(r);
-        for (Py_ssize_t i = 0; i < held; i++) {
-            PyObject *o = PyList_GET_ITEM(items, i);
-            unsigned long period = PyLong_AsUnsignedLong(SLOT(o, classes[HIL_MSG_TELEMETRY].off[0]));
-            if (PyErr_Occurred()) {             /* (not a period: its row says so later) */
-                PyErr_Clear();
-                period = 1u;
-            }
-            q.obj[q.n] = Py_NewRef(o);
-            q.m[q.n].type = HIL_MSG_TELEMETRY;
-            q.m[q.n].u.telemetry.period = (uint32_t)period;
-            q.n++;
-        }
-        Py_DECREF(items);
-    }
-
-    while (done < count) {
-        if (counts[4] != 0) {                   /* closed: the caller's path raises */
-            state = LOOP_HANDED;
-            break;
-        }
-        PyObject *s = PyObject_CallNoArgs(sample);
-        if (s == NULL) {
-            failed = 1;
-            break;
-        }
-        if (!PyTuple_Check(s) || PyTuple_GET_SIZE(s) != 6) {
-            Py_DECREF(s);
-            PyErr_SetString(PyExc_TypeError, "exchange_periods: sample() must return 6 values");
-            failed = 1;
-            break;
-        }
-        unsigned long k = PyLong_AsUnsignedLong(PyTuple_GET_ITEM(s, 0));
-        if (PyErr_Occurred()) {
-            Py_DECREF(s);
-            failed = 1;
-            break;
-        }
-        if (k % (unsigned long)publish_every == 0u || (live_every > 0u && k % live_every == 0u)) {
-            Py_DECREF(s);
-            state = LOOP_HANDED;
-            break;
-        }
-        double sent_at = 0.0;
-        int io_errno = 0;
-        const char *io_what = NULL;
-        if (by_fd) {
-            /* SAMPLE out; the record is made while the board computes; then its answers */
-            uint8_t frame[HIL_MAX_ENCODED_FRAME];
-            int n_frame = encode_sample_frame("exchange_periods", &PyTuple_GET_ITEM(s, 0), enc, capture_out, frame);
-            if (n_frame < 0) {
-                Py_DECREF(s);
-                failed = 1;
-                break;
-            }
-            if (fd_write_all(fd, frame, (size_t)n_frame, write_timeout_s) < 0) {
-                io_errno = errno;
-                io_what = io_errno == ETIMEDOUT ? "write timed out (nobody reading?)" : "write failed";
-            } else {
-                counts[0] += 1;
-                counts[2] += n_frame;
-            }
-            sent_at = monotonic_s();
-        } else if (exchange_frames("exchange_periods", exchange, fw, enc, dec, capture_out, capture_in,
-                                   &PyTuple_GET_ITEM(s, 0), counts, &q, &spill, other_threads()) < 0) {
-            Py_DECREF(s);
-            failed = 1;
-            break;
-        }
-        int rc = record_period(&st, s, truth);
-        Py_DECREF(s);
-        if (rc < 0) {
-            failed = 1;
-            break;
-        }
-        if (io_what != NULL) {
-            extra = Py_BuildValue("(is)", io_errno, io_what);
-            state = extra == NULL ? LOOP_DONE : LOOP_LINK_ERROR;
-            failed = extra == NULL;
-            break;
-        }
-        /* the answers, from the queue's front; over a descriptor, read as they come within the
-         * SAMPLE's one deadline */
-        long gates = -1;
-        uint16_t duty[3] = {0, 0, 0};
-        int taken = spill != NULL ? 2 : take_answers(&q, k, answer, live_every, &st, &gates, duty);
-        while (by_fd && taken == 0) {
-            double left = sent_at + answer_timeout_s - monotonic_s();
-            int ready_now = left > 0.0 ? fd_wait(fd, POLLIN, left) : 0;
-            if (ready_now <= 0) {
-                if (ready_now < 0) {
-                    io_errno = errno;
-                    io_what = "read failed";
-                }
-                break;                          /* the deadline: the caller's late handling */
-            }
-            uint8_t buf[4096];
-            ssize_t got;
-            Py_BEGIN_ALLOW_THREADS
-            got = read(fd, buf, sizeof buf);
-            Py_END_ALLOW_THREADS
-            if (got < 0 && (errno == EAGAIN || errno == EWOULDBLOCK || errno == EINTR)) {
-                continue;
-            }
-            if (got <= 0) {
-                io_errno = got < 0 ? errno : 0;
-                io_what = got == 0 || io_errno == EIO ? "the other end closed the line" : "read failed";
-                break;
-            }
-            if (fd_take_in(buf, (size_t)got, partial, dec, capture_in, counts, &q, &spill) < 0) {
-                taken = -1;
-                break;
-            }
-            taken = spill != NULL ? 2 : take_answers(&q, k, answer, live_every, &st, &gates, duty);
-        }
-        if (taken < 0) {
-            failed = 1;
-            break;
-        }
-        if (io_what != NULL) {
-            extra = Py_BuildValue("(is)", io_errno, io_what);
-            state = extra == NULL ? LOOP_DONE : LOOP_LINK_ERROR;
-            failed = extra == NULL;
-            break;
-        }
-        if (taken != 1) {
-            state = LOOP_PENDING;
-            if (by_fd && (extra = PyFloat_FromDouble(sent_at)) == NULL) {
-                failed = 1;
-            }
-            break;
-        }
-        PyObject *r;
-        if (answer == 1) {
-            PyObject *d = Py_BuildValue("(ddd)", duty[0] / 65535.0, duty[1] / 65535.0, duty[2] / 65535.0);
-            if (d == NULL) {
-                failed = 1;
-                break;
-            }
-            PyObject *kw = PyTuple_Pack(1, str_duty);
-            PyObject *call_args[1] = {d};
-            r = kw == NULL ? NULL : PyObject_Vectorcall(step, call_args, 0, kw);
-            Py_XDECREF(kw);
-            Py_DECREF(d);
-        } else {
-            PyObject *g = PyLong_FromLong(gates);
-            r = g == NULL ? NULL : PyObject_CallOneArg(step, g);
-            Py_XDECREF(g);
-        }
-        if (r == NULL) {
-            failed = 1;
-            break;
-        }
-        Py_DECREF(r);
-        done++;
-        if (stop != Py_None) {
-            r = PyObject_CallNoArgs(stop);
-            if (r == NULL) {
-                failed = 1;
-                break;
-            }
-            int yes = PyObject_IsTrue(r);
-            Py_DECREF(r);
-            if (yes < 0) {
-                failed = 1;
-                break;
-            }
-            if (yes) {
-                state = LOOP_STOPPED;
-                break;
-            }
-        }
-        if (q.head > 0) {                       /* keep the queue's room at its front */
-            memmove(&q.m[0], &q.m[q.head], (size_t)(q.n - q.head) * sizeof q.m[0]);
-            memmove(&q.obj[0], &q.obj[q.head], (size_t)(q.n - q.head) * sizeof q.obj[0]);
-            q.n -= q.head;
-            q.head = 0;
-        }
-    }
-    PyBuffer_Release(&counts_view);
-    stage_release(&st);
-    /* what is left of the queue goes back to inbox: the state the Python loop leaves */
-    if (failed) {
-        Py_XDECREF(extra);
-        PyObject *et, *ev, *tb;
-        PyErr_Fetch(&et, &ev, &tb);
-        if (queue_to_inbox(&q, spill, inbox) < 0) {
-            PyErr_Clear();
-        }
-        PyErr_Restore(et, ev, tb);
-        return NULL;
-    }
-    if (queue_to_inbox(&q, spill, inbox) < 0) {
-        Py_XDECREF(extra);
-        return NULL;
-    }
-    return loop_result(done, state, extra);
+    PyBuffer_Release(&L.counts_view);
+    stage_release(&L.st);
+    return loop_finish(&L);
 }
 
 PyDoc_STRVAR(stage_period_doc,
