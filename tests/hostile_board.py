@@ -623,6 +623,7 @@ OUTCOME_KINDS = (
     ("parameter", "does not know parameter"),
     ("parameter", "refused parameter"),
     ("parameter", "PARAM_GET reads back"),
+    ("parameter", "with a non-finite value in force"),
 )
 
 

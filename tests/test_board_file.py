@@ -162,3 +162,14 @@ def test_a_plans_board_key_names_a_file_relative_to_the_plan(tmp_path):
     with pytest.raises(ConfigError, match="board file not found"):
         load_plan(_write(tmp_path, "name: p\nboard: nope.yaml\nsteps:\n  - run: {duration_s: 1}\n",
                          "p3.yaml"))
+
+
+@pytest.mark.parametrize("answered", [float("nan"), float("inf"), float("-inf")])
+def test_a_non_finite_value_in_force_is_refused_by_name(answered):
+    """A board that answers a PARAM_SET with status OK and a NaN or infinite value is refused,
+    naming the parameter, not accepted as a clamp."""
+    with FakeBoard(capabilities=0x1, clamp={STANDARD_PARAMS["pole_pairs"].id: answered}) as board:
+        with pytest.raises(SessionError, match="answered parameter pole_pairs = 1 with a "
+                                               "non-finite value in force"):
+            with _session(board, spec_board()):
+                pass

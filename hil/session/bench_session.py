@@ -434,6 +434,11 @@ class BenchSession:
         if status != 0:
             raise SessionError(f"{where} refused parameter {name} = {value:g} (status {status} "
                                f"{_param_status(status)}; keeps {answer.value:g})")
+        if not math.isfinite(answer.value):
+            # a board's answer is an input like any other: a non-finite value in force is
+            # refused, not logged as a clamp (SPEC 2.8.3)
+            raise SessionError(f"{where} answered parameter {name} = {value:g} with a "
+                               f"non-finite value in force ({answer.value!r})")
         requested = _f32(value)
         clamped = _f32(answer.value) != requested
         if clamped and pid == int(ParamId.CONTROL_PERIOD_S):
