@@ -434,11 +434,6 @@ class BenchSession:
         if status != 0:
             raise SessionError(f"{where} refused parameter {name} = {value:g} (status {status} "
                                f"{_param_status(status)}; keeps {answer.value:g})")
-        if not math.isfinite(answer.value):
-            # a board's answer is an input like any other: a non-finite value in force is
-            # refused, not logged as a clamp (SPEC 2.8.3)
-            raise SessionError(f"{where} answered parameter {name} = {value:g} with a "
-                               f"non-finite value in force ({answer.value!r})")
         requested = _f32(value)
         clamped = _f32(answer.value) != requested
         if clamped and pid == int(ParamId.CONTROL_PERIOD_S):
@@ -446,6 +441,11 @@ class BenchSession:
                                f"{_ns_text(answer.value)}, the bench runs "
                                f"{round(self.period_s * 1e9)} ns (CONTROL_PERIOD_S {value:g} "
                                f"answered {answer.value:g})")
+        if not math.isfinite(answer.value):
+            # a board's answer is an input like any other: a non-finite value in force is
+            # refused, not logged as a clamp (SPEC 2.8.3)
+            raise SessionError(f"{where} answered parameter {name} = {value:g} with a "
+                               f"non-finite value in force ({answer.value!r})")
         readback = self._param_exchange(ParamGet(id=int(pid)), int(pid),
                                         f"parameter {name} (PARAM_GET)")
         if readback.status != 0 or _f32(readback.value) != _f32(answer.value):
