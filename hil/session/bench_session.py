@@ -781,21 +781,15 @@ class BenchSession:
                     return
                 self.stale_answers += 1
                 self._last_stale = ("GATES", msg.period)
-            elif t is Duty:
+            elif t is Duty or t is DutyLegs:
                 if msg.period == k:
                     d = msg.duty
                     answer.duty = (d[0] / 65535.0, d[1] / 65535.0, d[2] / 65535.0)
+                    if t is DutyLegs:
+                        answer.legs = msg.leg_enable & LEGS_ALL  # reserved bits ignored (SPEC 4)
                     return
                 self.stale_answers += 1
-                self._last_stale = ("DUTY", msg.period)
-            elif t is DutyLegs:
-                if msg.period == k:
-                    d = msg.duty
-                    answer.duty = (d[0] / 65535.0, d[1] / 65535.0, d[2] / 65535.0)
-                    answer.legs = msg.leg_enable & LEGS_ALL  # reserved bits ignored (SPEC 4)
-                    return
-                self.stale_answers += 1
-                self._last_stale = ("DUTY_LEGS", msg.period)
+                self._last_stale = ("DUTY" if t is Duty else "DUTY_LEGS", msg.period)
             elif t is Telemetry:
                 # every period's companion: straight to the recorder; named among
                 # "others" only if the period goes unanswered

@@ -896,6 +896,19 @@ static void currents(const cfg_t *m, double pa, double pb, double th, double *ia
 
 /* ------------------------------------------------------------------ argument helpers */
 
+/* The motor constants MotorModel._k passes, in its order (plant_rt/motor.py), into a cfg_t. */
+static void motor_constants(cfg_t *m, const double k[8])
+{
+    m->pole_pairs = k[0];
+    m->resistance_ohm = k[1];
+    m->flux_linkage_wb = k[2];
+    m->inv_ld_per_h = k[3];
+    m->inv_lq_per_h = k[4];
+    m->inv_inertia_per_kgm2 = k[5];
+    m->damping_nm_per_rad_s = k[6];
+    m->torque_coeff = k[7];
+}
+
 static int get_doubles(PyObject *seq, double *out, Py_ssize_t n, const char *what)
 {
     if (!PyTuple_Check(seq) && !PyList_Check(seq)) {
@@ -1882,14 +1895,7 @@ static PyObject *mod_leg_period(PyObject *self, PyObject *const *args, Py_ssize_
     if (get_doubles(args[0], k, 8, "motor constants") < 0) {
         return NULL;
     }
-    m.pole_pairs = k[0];
-    m.resistance_ohm = k[1];
-    m.flux_linkage_wb = k[2];
-    m.inv_ld_per_h = k[3];
-    m.inv_lq_per_h = k[4];
-    m.inv_inertia_per_kgm2 = k[5];
-    m.damping_nm_per_rad_s = k[6];
-    m.torque_coeff = k[7];
+    motor_constants(&m, k);
     double ld;
     if (get_double(args[1], &ld) < 0) {
         return NULL;
@@ -1980,14 +1986,7 @@ static PyObject *mod_advance(PyObject *self, PyObject *const *args, Py_ssize_t n
     if (n == -1 && PyErr_Occurred()) {
         return NULL;
     }
-    m.pole_pairs = k[0];
-    m.resistance_ohm = k[1];
-    m.flux_linkage_wb = k[2];
-    m.inv_ld_per_h = k[3];
-    m.inv_lq_per_h = k[4];
-    m.inv_inertia_per_kgm2 = k[5];
-    m.damping_nm_per_rad_s = k[6];
-    m.torque_coeff = k[7];
+    motor_constants(&m, k);
     double st[4] = {f[0], f[1], f[2], f[3]};
     if (spm) {
         advance_spm(&m, st, f[4], f[5], f[6], n, f[8], f[9], f[10]);
