@@ -175,6 +175,24 @@ def test_floating_phase_reads_star_point_plus_back_emf():
     assert max(seen) - min(seen) > 5.0      # the back-EMF moved the floating terminal
 
 
+def test_floated_duty_leg_under_a_period_hook_reads_the_star_point():
+    """DUTY_LEGS with leg c floated, on a plant whose thermal model hooks every step, rotor
+    locked (no back-EMF: with one, a floated leg's diodes conduct whenever a and b are both
+    high or both low): a and b average d v_dc over the period, c the star point
+    (d_a + d_b) v_dc / 2."""
+    p = quiet(load={"locked": True}, thermal={"enabled": True})
+    plant = Plant(p)
+    vdc = p.dc_link.source_voltage_v
+    plant.sensor_frame()
+    for k in range(50):
+        plant.step(duty=(0.7, 0.2, 0.5), legs=0b011)
+        plant.sensor_frame()
+        v = plant.sensors.terminal.filtered_v
+        assert abs(plant.truth()[F["i_c"]]) < 1e-9
+        assert plant.truth()[F["i_a"]] > 0.1 * (k + 1) / 50
+        assert v == pytest.approx([0.7 * vdc, 0.2 * vdc, 0.45 * vdc], rel=1e-14), k
+
+
 def test_bemf_comparators_flip_where_the_closed_form_says():
     """All legs off, coasting below the link voltage: terminal x minus the virtual neutral is
     e_x (sum e = 0), so comparator x reads 1 iff e_x > offset_x: it turns on where
