@@ -55,13 +55,38 @@ class SensorFrame(NamedTuple):
     adc_temperature: int
 
 
-def _stuck_bit(level) -> int | None:
-    """A stuck fault's level: None (not stuck), or 0 / 1."""
+def _stuck_level(level) -> int | None:
+    """A stuck fault's level checked: None (not stuck), or 0 / 1."""
     if level is None:
         return None
-    if level not in (0, 1):
+    if isinstance(level, float) or level not in (0, 1):
         raise ValueError(f"a stuck level is None, 0 or 1, got {level!r}")
     return int(level)
+
+
+class StuckLevels(list):
+    """Per phase (a, b, c) None or the level 0 / 1 a sensor is stuck at; a fault sets an
+    element (levels[x] = 1, levels[:] = [...]) and anything else is refused there."""
+
+    def __init__(self):
+        super().__init__((None, None, None))
+
+    def __setitem__(self, index, value):
+        if isinstance(index, slice):
+            value = [_stuck_level(v) for v in value]
+            if len(range(*index.indices(3))) != len(value):
+                raise ValueError("stuck levels are exactly three, one per phase")
+        else:
+            value = _stuck_level(value)
+        super().__setitem__(index, value)
+
+    def __delitem__(self, index):
+        raise TypeError("stuck levels are exactly three, one per phase")
+
+    def _fixed_length(self, *args, **kwargs):
+        raise TypeError("stuck levels are exactly three, one per phase")
+
+    append = extend = insert = pop = remove = clear = __iadd__ = __imul__ = _fixed_length
 
 
 class HallSensors:
@@ -77,13 +102,21 @@ class HallSensors:
     or 1 (the sensor's output held at that level; its state keeps following the magnet).
     """
 
-    __slots__ = ("placement_error_rad", "hysteresis_rad", "stuck", "state")
+    __slots__ = ("placement_error_rad", "hysteresis_rad", "_stuck", "state")
 
     def __init__(self, params: HallParams):
         self.placement_error_rad = [math.radians(e) for e in params.placement_error_deg]
         self.hysteresis_rad = math.radians(params.hysteresis_deg)
-        self.stuck: list[int | None] = [None, None, None]
+        self._stuck = StuckLevels()
         self.state: list[int] | None = None
+
+    @property
+    def stuck(self) -> StuckLevels:
+        return self._stuck
+
+    @stuck.setter
+    def stuck(self, levels) -> None:
+        self._stuck[:] = list(levels)
 
     def read(self, theta_e_rad: float) -> int:
         """The Hall word (bit0 A, bit1 B, bit2 C) at electrical angle theta_e_rad."""
@@ -101,8 +134,8 @@ class HallSensors:
                 state[x] = 1
             elif c < -threshold:
                 state[x] = 0
-            level = self.stuck[x]
-            word |= (state[x] if level is None else _stuck_bit(level)) << x
+            level = self._stuck[x]
+            word |= (state[x] if level is None else level) << x
         return word
 
 
@@ -197,7 +230,7 @@ class TerminalVoltages:
     Faults: ``comparator_stuck[x]`` None, 0 or 1.
     """
 
-    __slots__ = ("channels", "comparator_offset_v", "comparator_stuck", "filtered_v",
+    __slots__ = ("channels", "comparator_offset_v", "_comparator_stuck", "filtered_v",
                  "_filter_gain", "_filter_decay")
 
     def __init__(self, params: TerminalParams, seed: int, period_s: float):
@@ -205,11 +238,19 @@ class TerminalVoltages:
             AdcChannel(params.v_per_count, 0.0, params.bits, 1.0, params.noise_rms_counts,
                        GaussianNoise(seed, stream)) for stream in STREAM_TERMINAL_VOLTAGES)
         self.comparator_offset_v = list(params.comparator_offset_v)
-        self.comparator_stuck: list[int | None] = [None, None, None]
+        self._comparator_stuck = StuckLevels()
         self.filtered_v: list[float] | None = None
         tau = params.filter_time_constant_s
         self._filter_gain = 1.0 if tau == 0.0 else -math.expm1(-period_s / tau)
         self._filter_decay = 0.0 if tau == 0.0 else -period_s / tau     # log(1 - gain)
+
+    @property
+    def comparator_stuck(self) -> StuckLevels:
+        return self._comparator_stuck
+
+    @comparator_stuck.setter
+    def comparator_stuck(self, levels) -> None:
+        self._comparator_stuck[:] = list(levels)
 
     @property
     def filter_gain(self) -> float:
@@ -235,11 +276,9 @@ class TerminalVoltages:
         neutral = (y[0] + y[1] + y[2]) / 3.0
         bits = 0
         for x in range(3):
-            level = self.comparator_stuck[x]
+            level = self._comparator_stuck[x]
             if level is None:
                 level = 1 if y[x] > neutral + self.comparator_offset_v[x] else 0
-            else:
-                level = _stuck_bit(level)
             bits |= level << x
         ch = self.channels
         return _code(ch[0], y[0]), _code(ch[1], y[1]), _code(ch[2], y[2]), bits

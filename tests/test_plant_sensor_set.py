@@ -429,3 +429,18 @@ def test_bad_sensor_set_keys_are_refused_naming_the_key(section, value, words):
 def test_bad_thermal_key_is_refused():
     with pytest.raises(ConfigError, match="thermal_capacitance_j_per_k"):
         load_profile(overrides={"thermal": {"thermal_capacitance_j_per_k": 0.0}})
+
+
+def test_stuck_levels_are_checked_where_a_fault_sets_them():
+    plant = Plant(quiet())
+    for levels in (plant.sensors.hall.stuck, plant.sensors.terminal.comparator_stuck):
+        for bad in (2, -1, 0.5, "1"):
+            with pytest.raises(ValueError, match="None, 0 or 1"):
+                levels[0] = bad
+        with pytest.raises(ValueError, match="exactly three"):
+            levels[:] = [1, 1]
+        with pytest.raises(TypeError):
+            levels.append(1)
+        assert list(levels) == [None, None, None]
+        levels[2] = 1
+        assert list(levels) == [None, None, 1]
