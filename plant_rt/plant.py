@@ -5,6 +5,8 @@ Per period k (T = control_period_s):
     s = plant.sample()        # what the board's converters read at t_k = k T
     plant.step(gates=...)     # integrate [t_k, t_k+1] with the board's answer
 
+(plant.sensor_frame() instead of sample() for a board with a sensor set: plant_rt.sensor_set.)
+
 The answer takes effect computation_delay_s after t_k; before that the previous command holds.
 The period is cut into intervals of constant switch state (computation delay, PWM edges, dead
 time, load-profile knots) and each interval is integrated exactly as it is, never averaged:
