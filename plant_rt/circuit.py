@@ -27,6 +27,8 @@ continuous but not smooth, so an RK4 step across it would lose its order (1e-4 o
 against the switched-circuit reference before; the step now ends there, nothing changes state).
 This is what makes the safe state at 3000 rpm decay to zero and then stay there while the line
 back-EMF is below the 70 V link.
+With a trapezoidal back-EMF (plant_rt.motor) the trapezoid's corners, where d e/dt jumps, end
+a step in the same way as a knee (the rhs is then _rhs_shaped).
 
 The load torque within an interval is the linear piece set by set_load_segment (the plant cuts
 its intervals at the profile's knots), plus the speed term.
@@ -86,6 +88,9 @@ class Network:
         # per phase: +1 while |i| > i_knee at the last accepted state, -1 inside the knee
         # (which way the knee event looks); only with a device drop
         self._knee_side = [0, 0, 0]
+        # trapezoidal machine: the sign of each corner family's wave at the last accepted state
+        self._corner_side = [1.0, 1.0]
+        self._theta_e = 0.0
         # load profile over the interval: value v0 at t_a, slope (set_load_segment)
         self._tl = (0.0, 0.0, 0.0)
         #: the C kernel (plant_rt.ckernel.KERNEL), None for this Python implementation
@@ -197,6 +202,9 @@ class Network:
         e = m.p * y[3]
         c, s = cos(e), sin(e)
         if self.all_zero:
+            if m.trapezoidal:
+                y[0], y[1], _, _ = m.magnet_flux_ab(e)
+                return
             y[0] = m.psim * c
             y[1] = m.psim * s
             return
@@ -258,6 +266,8 @@ class Network:
             ) -> tuple[float, float, float, float, float, float, float, float]:
         """(dpsi_a, dpsi_b, dw, dtheta, dv_dc, u_alpha, u_beta, i_dc) at time t (s, absolute)."""
         m = self.motor
+        if m.trapezoidal:
+            return self._rhs_shaped(t, pa, pb, w, th, v)
         p, r, psim, ild, ilq = m.p, m.r, m.psim, m.ild, m.ilq
         e = p * th
         c = cos(e)
@@ -325,6 +335,73 @@ class Network:
             dw = (te - m.b * w - ((v0 + slope * (t - t_a)) + self.load.kw * w)) * m.ij
         return dpa, dpb, dw, w, dc.dv_dt(v, idc), va, vb, idc
 
+    def _rhs_shaped(self, t: float, pa: float, pb: float, w: float, th: float, v: float
+                    ) -> tuple[float, float, float, float, float, float, float, float]:
+        """rhs() of the trapezoidal machine (Ld = Lq = L; plant_rt.motor's magnet_flux_ab):
+        i_ab = (psi_ab - psi_m,ab)/L, back-EMF e_ab = omega_e psi_m,ab', torque
+        1.5 p psi_m,ab' . i_ab. A floating phase x keeps d i_x/dt = 0:
+        x . (u_ab + 2/3 x V_x - R i_ab - e_ab) = 0 with |x| = 1 gives V_x."""
+        m = self.motor
+        r, ild = m.r, m.ild
+        self._theta_e = m.p * th
+        ma, mb, da, db = m.magnet_flux_ab(self._theta_e)
+        we = m.p * w
+        dc = self.dc
+        if self.all_zero:
+            va = we * da
+            vb = we * db
+            dpa, dpb, te, idc = va, vb, 0.0, 0.0
+            vdc = dc.voltage(v, 0.0)
+            self.cur = (0.0, 0.0, 0.0)
+            self._emf = (va, vb)
+        else:
+            ia = (pa - ma) * ild
+            ib = (pb - mb) * ild
+            cur = (ia, -0.5 * ia + S32 * ib, -0.5 * ia - S32 * ib)
+            kinds = self.kinds
+            idc = 0.0
+            for x in range(3):
+                if kinds[x] == H or kinds[x] == N:
+                    idc += cur[x]
+            vdc = dc.voltage(v, idc)
+            va, vb = self._terminal_ab(kinds, cur, vdc)
+            if self.zero:
+                ex0, ex1 = PHASE_AXES[self.zero[0]]
+                vx = -(ex0 * (va - r * ia - we * da) + ex1 * (vb - r * ib - we * db)) / TWO_THIRDS
+                va += TWO_THIRDS * ex0 * vx
+                vb += TWO_THIRDS * ex1 * vx
+                self.vx = vx
+            dpa = va - r * ia
+            dpb = vb - r * ib
+            te = m.kt * (da * ia + db * ib)
+            self.cur = cur
+        self.vdc = vdc
+        self.te = te
+        if self.load.locked:
+            dw = 0.0
+        else:
+            t_a, v0, slope = self._tl
+            dw = (te - m.b * w - ((v0 + slope * (t - t_a)) + self.load.kw * w)) * m.ij
+        return dpa, dpb, dw, w, dc.dv_dt(v, idc), va, vb, idc
+
+    def _terminal_ab(self, kinds: list[int], cur: tuple, vdc: float) -> tuple[float, float]:
+        """u_ab of the driven and diode-conducting terminals (eq. (7); an O phase adds 0)."""
+        ud = self.ud
+        vt = [0.0, 0.0, 0.0]
+        for x in range(3):
+            k = kinds[x]
+            if k == H or k == L:
+                drop = 0.0
+                if ud:
+                    z = cur[x] / self.knee
+                    drop = ud * (1.0 if z > 1.0 else -1.0 if z < -1.0 else z)
+                vt[x] = (vdc if k == H else 0.0) - drop
+            elif k == P:
+                vt[x] = -ud
+            elif k == N:
+                vt[x] = vdc + ud
+        return (2.0 * vt[0] - vt[1] - vt[2]) / 3.0, (vt[1] - vt[2]) * INV_SQRT3
+
     def _release(self, va: float, vb: float, vdc: float) -> None:
         """With no current anywhere: how far the first pair of legs is from conducting.
 
@@ -380,13 +457,25 @@ class Network:
             for x in range(3):
                 if (kinds[x] == H or kinds[x] == L) and side[x]:
                     out.append((side[x] * (knee - abs(cur[x])), ("k", x)))
+        if self.motor.trapezoidal:
+            # the trapezoid's corners (theta_e = +-ramp mod 60 deg), where d e/dt jumps: a
+            # step ends there as at a knee, so that RK4 keeps its order
+            for k, side in enumerate(self._corner_side):
+                out.append((-side * self._corner_wave(k), ("k", -1)))
         return out
+
+    def _corner_wave(self, k: int) -> float:
+        """sin(3 (theta_e -+ ramp)) at the last rhs() state: zero at every corner of family k."""
+        ramp = self.motor.ramp_rad
+        return sin(3.0 * (self._theta_e - ramp if k == 0 else self._theta_e + ramp))
 
     def _note_knee_sides(self) -> None:
         """Which side of the knee each driven current is on at the last rhs() state."""
         if self.ud:
             knee, cur = self.knee, self.cur
             self._knee_side = [1 if abs(cur[x]) > knee else -1 for x in range(3)]
+        if self.motor.trapezoidal:
+            self._corner_side = [1.0 if self._corner_wave(k) > 0.0 else -1.0 for k in (0, 1)]
 
     # ----------------------------------------------------------- integration
     def _rk4(self, t: float, y: list[float], h: float, k1: tuple) -> tuple[list[float], tuple]:
@@ -502,7 +591,10 @@ class Network:
                 q4 = dc.dv_dt(v + h * q3, 0.0)
                 v += h / 6.0 * (q1 + 2.0 * (q2 + q3) + q4)
         e = m.p * th
-        out = [m.psim * cos(e), m.psim * sin(e), w, th, v]
+        if m.trapezoidal:
+            out = [*m.magnet_flux_ab(e)[:2], w, th, v]
+        else:
+            out = [m.psim * cos(e), m.psim * sin(e), w, th, v]
         self.rhs(t1, *out)
         self._release(self._emf[0], self._emf[1], self.vdc)
         if self.g_release > 0.0:
