@@ -198,17 +198,12 @@ def test_a_sweep_run_sees_its_sampled_profile_in_its_limits(tmp_path):
 
 # ------------------------------------------------------------------ every acceptance limit
 # Acceptance limits of test_plans/ still written as numbers (plan file, check, profile of a
-# `profile_limits` entry or None for `limits`): their derivations are in each plan's
-# description but not yet formulas. This list may only shrink: a limit converted to a formula
-# (or relabelled role: regression with a note) must leave it, and no new literal acceptance
-# limit may join it. Limits that state an identity (low == high in "1": a state or fault
-# code, a switch pattern) are definitions, not tolerances, and are not listed.
-LITERAL_ACCEPTANCE_LIMITS = {
-    ("05_rotor_position.yaml", "rotor position error, arctan angle (RMS)", None),
-    ("05_rotor_position.yaml", "rotor position error, EKF angle (RMS)", None),
-    ("05_rotor_position.yaml", "rotor position error, arctan angle (peak)", None),
-    ("05_rotor_position.yaml", "rotor position error, EKF angle (peak)", None),
-}
+# `profile_limits` entry or None for `limits`). Empty: every acceptance limit is a formula of
+# the profile, the board and the plan, or a regression bound whose note names the
+# measurement. It stays empty: a new literal acceptance limit fails the test below. Limits
+# that state an identity (low == high in "1": a state or fault code, a switch pattern) are
+# definitions, not tolerances, and are not listed.
+LITERAL_ACCEPTANCE_LIMITS: set[tuple[str, str, str | None]] = set()
 
 
 def literal_acceptance_limits(paths) -> set[tuple[str, str, str | None]]:
