@@ -273,3 +273,35 @@ def test_the_walker_finds_a_literal_acceptance_limit(tmp_path):
         assert ("01.yaml", "rise time 10-90 % (torque-limited)", None) not in literal_acceptance_limits([plans])
     finally:
         PLANS = saved
+
+
+# ------------------------------------------------------------------ bench/hardware_limits.py
+def test_hardware_limits_reads_the_profile_and_agrees_with_the_plans_formulas(tmp_path):
+    """bench/hardware_limits.py models what it reads (issue 34 item 5): a hardware-like profile
+    whose DC-link reading is 2 % high instead of 0.8 % moves its prediction of plan 02's true
+    flux, and the plans' first-order formulas (their constants, bound to the same profile)
+    stay within 0.3 mWb and 0.03 Nm of its fuller second model, on both profiles."""
+    from bench import hardware_limits as hl
+
+    profile = yaml.safe_load((REPO / "plant_rt" / "profiles" / "paper-hardware.yaml").read_text())
+    profile["sensors"]["dc_voltage"]["gain"] = 1.02
+    high_gain = tmp_path / "high-gain.yaml"
+    high_gain.write_text(yaml.safe_dump(profile))
+    try:
+        hl.load(None)
+        nominal = hl.formulas_against_model()
+        hl.load(high_gain)
+        moved = hl.formulas_against_model()
+    finally:
+        hl.load(None)
+    for result in (nominal, moved):
+        assert result["plan02_true_flux_mwb"]["formula"] == pytest.approx(
+            result["plan02_true_flux_mwb"]["second_model"], abs=0.3)
+        assert result["plan06_true_flux_mwb"]["formula"] == pytest.approx(
+            result["plan06_true_flux_mwb"]["second_model"], abs=0.3)
+        assert result["plan01_true_torque_at_the_limit_nm"]["formula"] == pytest.approx(
+            result["plan01_true_torque_at_the_limit_nm"]["second_model"], abs=0.03)
+    # e_v 1.66 % -> 2.86 %: the true flux under the board's 99 mWb falls by about 1.1 mWb
+    for key in ("formula", "second_model"):
+        drop = nominal["plan02_true_flux_mwb"][key] - moved["plan02_true_flux_mwb"][key]
+        assert 0.8 < drop < 1.5, (key, drop)
