@@ -157,14 +157,19 @@ INIT_MOTORS = {
 }
 
 
+FOC01 = PLANS / "foc" / "01_speed_step.yaml"
+
+
+@pytest.mark.parametrize("plan", [PLAN01, FOC01], ids=["01", "foc01"])
 @pytest.mark.parametrize("motor", sorted(INIT_MOTORS))
-def test_plan01_passes_on_a_hil_init_motor(tmp_path, motor):
-    """The paper's plan 01 file, unchanged, on a `hil init` motor's profile and stub board file:
-    its limits and stimuli are evaluated for that motor, and the stub passes them."""
+def test_speed_step_plan_passes_on_a_hil_init_motor(tmp_path, motor, plan):
+    """The paper's plan 01 file and its FOC counterpart, unchanged, on a `hil init` motor's
+    profile and stub board file: their limits (the overshoot's e^-2 T_max / (Kp dw) among
+    them) and stimuli are evaluated for that motor, and the stub passes them."""
     project = tmp_path / motor
     assert hil_main(["init", str(project), "--name", motor, *INIT_MOTORS[motor]]) == 0
     out = tmp_path / "out"
-    code = hil_main(["run", str(PLAN01), "--profile", str(project / "profile.yaml"),
+    code = hil_main(["run", str(plan), "--profile", str(project / "profile.yaml"),
                      "--board", str(project / "boards" / "stub.yaml"), "--out", str(out),
                      "--no-progress"])
     [path] = out.glob("**/result.json")
