@@ -22,6 +22,7 @@ import os
 import select
 import sys
 import threading
+from dataclasses import fields
 from pathlib import Path
 
 if __package__ in (None, ""):      # run as a program: the repository on the path
@@ -68,9 +69,7 @@ class SensorBoardLogic:
 
 def sample_record(msg) -> dict:
     """A received SAMPLE or SAMPLE_SENSORS as plain data (its type and fields)."""
-    fields = {k: v for k, v in vars(msg).items()} if hasattr(msg, "__dict__") else \
-        dict(msg._asdict())
-    return {"type": type(msg).__name__, **fields}
+    return {"type": type(msg).__name__, **{f.name: getattr(msg, f.name) for f in fields(msg)}}
 
 
 # ------------------------------------------------------------------ CAN (python-can virtual bus)

@@ -216,10 +216,10 @@ def test_exec_board_gets_every_sensor(tmp_path):
 
 
 def test_can_board_gets_its_set_segmented():
-    """A set whose payload needs three CAN frames (SPEC 7.4) over python-can's virtual bus."""
+    """A set of 25 payload bytes, four CAN frames (SPEC 7.4), over python-can's virtual bus."""
     names = ("current_a", "current_b", "vdc", "encoder", "terminal_voltages", "resolver")
     mask = mask_of(names)
-    assert len(sample_sensors_can_dlc(mask)) == 3
+    assert sample_sensors_can_dlc(mask) == (8, 8, 8, 5)
     with CanSensorBoard(mask) as board:
         with session(board.url) as s:
             s.run_periods(PERIODS)
@@ -297,7 +297,8 @@ def test_board_file_bad_sensor_names_the_file_and_key(tmp_path, names, words):
 PLAN = """name: hall plan
 steps:
   - run: {duration_s: 0.001}
-  - check: {name: hall moves, kind: statistic, statistic: max, signal: sample.hall}
+  - check: {name: hall moves, kind: statistic, statistic: max, signal: sample.hall,
+             role: finding}
 """
 
 
@@ -336,4 +337,4 @@ def test_sensor_set_log_names_the_signals(tmp_path):
                    if c["topic"] == "/plant/sample_sensors")
     signals = {f["signal"] for f in channel["fields"]}
     assert {"sample.hall", "sample.adc_ia", "plant.winding_temperature_degc"} <= signals
-    assert channel["messages"] == len(hall) == 300
+    assert channel["count"] == len(hall) == 300

@@ -379,8 +379,7 @@ class BenchSession:
         self.sensor_set = read_sensor_set(self)
         if self.sensor_set is None:
             return
-        self.sensor_sampler = SensorSampler(self.plant, self.sensor_set, self.recorder,
-                                            self.profile.sensors.current.phases)
+        self.sensor_sampler = SensorSampler(self.plant, self.sensor_set, self.recorder)
         self._event("sensor_set", {"sensor_set": self.sensor_set,
                                    "sensors": names_text(self.sensor_set)})
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 
-from protocol.messages import CAP_SENSOR_SET, SENSOR_SET_NAMES, ParamGet, Sample, SampleSensors
+from protocol.messages import CAP_SENSOR_SET, SENSOR_SET_NAMES, ParamGet, SampleSensors
 
 from hil.boards.board_file import sensor_set_names
 from hil.boards.sensor_fields import fields_of_set
@@ -75,34 +75,26 @@ def _mask(value: float, where: str) -> int:
     return mask
 
 
-#: CURRENT_PHASES' pairs (SPEC 8): the frame's fields that a SAMPLE's adc_i1, adc_i2 carry.
-_PHASE_FIELDS = {"ab": ("adc_ia", "adc_ib"), "ac": ("adc_ia", "adc_ic"), "bc": ("adc_ib", "adc_ic")}
-
-
 class SensorSampler:
     """Every period's SAMPLE_SENSORS for a board whose sensor set is `mask`: the plant's
     SensorFrame with only the set's fields, and the period's rows for the recorder
     (sample.<field> of the set, the winding temperature)."""
 
-    def __init__(self, plant, mask: int, recorder, current_phases: str = "ab"):
+    def __init__(self, plant, mask: int, recorder):
         self.plant = plant
         self.mask = mask
         self.fields = fields_of_set(mask)
         self.recorder = recorder
-        self._pair = _PHASE_FIELDS[current_phases]
         recorder.record_sample_sensors(self.fields, temperature=True)
 
-    def __call__(self) -> tuple[Sample, SampleSensors]:
-        """The period's SAMPLE_SENSORS, and what the recorder's SAMPLE row (sensor.*) takes
-        from it: the frame's currents of the profile's phase pair as adc_i1, adc_i2 (the counts
-        a SAMPLE would carry), its DC link, encoder and status. The period's sample_row (the
-        set's fields, the winding temperature) is recorded."""
-        frame = self.plant.sensor_frame()
+    def __call__(self):
+        """(the plant's sample of the period, its SAMPLE_SENSORS): the sample (the frame's
+        own, not drawn again: what a SAMPLE would have carried) is the recorder's sensor.* row;
+        the period's sample_row (the set's fields, the winding temperature) is recorded."""
+        plant = self.plant
+        frame = plant.sensor_frame()
         values = {f: getattr(frame, f) for f in self.fields}
-        msg = SampleSensors(period=frame.period, sensor_set=self.mask, status=frame.status,
-                            **values)
-        view = Sample(frame.period, getattr(frame, self._pair[0]), getattr(frame, self._pair[1]),
-                      frame.adc_vdc, frame.encoder, frame.status)
+        msg = SampleSensors(frame.period, self.mask, frame.status, **values)
         self.recorder.sample_row(frame.period, (*values.values(),
-                                                self.plant.winding_temperature_degc))
-        return view, msg
+                                                plant.winding_temperature_degc))
+        return plant.sample(), msg
