@@ -113,6 +113,11 @@ def test_board_gets_sample_sensors_with_exactly_its_set_and_the_plants_values(tm
     assert list(signals["sample.hall"][1]) == [rows[k]["hall"] for k in range(PERIODS)]
     assert list(signals["sample.adc_ic"][1]) == [rows[k]["adc_ic"] for k in range(PERIODS)]
     assert "plant.winding_temperature_degc" in signals
+    # the temperature sensor's scaling pushed from the profile (SPEC 8, ids 17 and 18)
+    sensors = load_profile().sensors
+    assert board.params[17] == np.float32(sensors.temperature.degc_per_count)
+    assert board.params[18] == np.float32(sensors.temperature.offset_counts)
+    assert 14 not in board.params              # no terminal voltages in this set
 
 
 def test_board_without_the_capability_still_gets_todays_sample():
@@ -311,6 +316,19 @@ def test_plan_naming_a_sensor_the_board_lacks_is_refused_before_the_run(tmp_path
     assert "sample.hall" in text and "'hall'" in text and ":4" in text and "plan.yaml" in text
     with pytest.raises(ConfigError, match="no sensors: list"):
         check_plan_board(plan, load_board(board_file(tmp_path)))
+
+
+def test_readme_lists_the_sensor_set_signals():
+    """test_plans/README.md's "Sensor-set signals" are exactly what plans accept beside the
+    catalogue, with the same units (parsed as test_signal_vocabulary parses "Signals")."""
+    from hil.plans.signals import SENSOR_SET_SIGNALS
+    from tests.test_signal_vocabulary import README, readme_signals
+
+    text = README.read_text().replace("\n## Signals\n", "\n## Catalogue\n")
+    listed = readme_signals(text.replace("\n## Sensor-set signals\n", "\n## Signals\n"))
+    assert listed == SENSOR_SET_SIGNALS
+    assert set(SENSOR_SET_SIGNALS) - {"plant.winding_temperature_degc"} == \
+        {f"sample.{f}" for f in ALL_SENSOR_FIELDS}
 
 
 def test_default_sample_log_has_no_sensor_set_channel(tmp_path):
