@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 from configfile.source import ConfigError
 from plant_rt import Plant, load_profile
-from protocol.messages import (CAP_GATES, CAP_SENSOR_SET, SENSOR_SET_NAMES, ParamGet, Sample,
-                               SampleSensors)
+from protocol.messages import (CAP_GATES, CAP_SENSOR_SET, SENSOR_SET_NAMES, Gates, ParamGet,
+                               Sample, SampleSensors)
 
 from hil.boards import load_board
 from hil.boards.sensor_fields import ALL_SENSOR_FIELDS, SENSOR_FIELDS_OF
@@ -118,6 +118,28 @@ def test_board_gets_sample_sensors_with_exactly_its_set_and_the_plants_values(tm
     assert board.params[17] == np.float32(sensors.temperature.degc_per_count)
     assert board.params[18] == np.float32(sensors.temperature.offset_counts)
     assert 14 not in board.params              # no terminal voltages in this set
+
+
+def test_a_resend_is_the_same_sample_sensors(tmp_path):
+    """SPEC 2.8.1: the board leaves period 5's first SAMPLE_SENSORS unanswered; the bench
+    resends that very message (not a SAMPLE, not a new frame)."""
+    mask = mask_of(HALL_SET)
+    ignored = []
+
+    def answer(msg, encoder):
+        if msg.period == 5 and not ignored:
+            ignored.append(msg)
+            return b""
+        return encoder.encode(Gates(period=msg.period, gates=0))
+
+    with FakeBoard(capabilities=SENSOR_CAPS, sensor_set=mask, on_sample=answer) as board:
+        with session(board.url, board_file(tmp_path, HALL_SET)) as s:
+            s.run_periods(10)
+            assert s.resent_samples == 1 and s.missed_answers == 0
+        got = [m for m in board.received if isinstance(m, (Sample, SampleSensors))]
+    fifth = [m for m in got if m.period == 5]
+    assert len(fifth) == 2 and fifth[0] == fifth[1] and type(fifth[1]) is SampleSensors
+    assert_frames_match(received_rows(got), mask, 10)
 
 
 def test_board_without_the_capability_still_gets_todays_sample():
