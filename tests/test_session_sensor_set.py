@@ -242,6 +242,34 @@ def test_exec_board_gets_every_sensor(tmp_path):
     assert_frames_match(rows, ALL_SENSORS, PERIODS)
 
 
+LIB_SOURCE = Path(__file__).resolve().parent / "data" / "sensor_board_lib.c"
+PROTO_C = Path(__file__).resolve().parents[1] / "protocol" / "c"
+
+
+def test_lib_board_gets_its_set_through_the_c_codec(tmp_path):
+    """A firmware library in this process (lib:) decoding with the reference C codec: the
+    session's Python loop sends SAMPLE_SENSORS through the link tap's C encoder."""
+    import subprocess
+
+    lib = tmp_path / "libsensorboard.so"
+    subprocess.run(["gcc", "-std=c99", "-Wall", "-Wextra", "-Werror", "-shared", "-fPIC",
+                    f"-I{PROTO_C}", "-o", str(lib), str(LIB_SOURCE), str(PROTO_C / "hil_proto.c")],
+                   check=True)
+    names = ("current_b", "vdc", "hall", "terminal_voltages", "bemf_comparators", "resolver")
+    mask = mask_of(names)
+    record = tmp_path / "got.txt"
+    with session(f"lib:{lib}?args=--sensor-set {mask} --record {record}") as s:
+        s.run_periods(PERIODS)
+        assert s.sensor_set == mask
+    lines = [line.split() for line in record.read_text().splitlines()]
+    assert lines and {line[0] for line in lines} == {"SampleSensors"}
+    rows = {}
+    for line in lines:
+        row = dict(zip(("period", "sensor_set", "status", *ALL_SENSOR_FIELDS), map(int, line[1:])))
+        assert rows.setdefault(row["period"], row) == row
+    assert_frames_match(rows, mask, PERIODS)
+
+
 def test_can_board_gets_its_set_segmented():
     """A set of 25 payload bytes, four CAN frames (SPEC 7.4), over python-can's virtual bus."""
     names = ("current_a", "current_b", "vdc", "encoder", "terminal_voltages", "resolver")
