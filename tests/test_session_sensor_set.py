@@ -381,6 +381,49 @@ def test_readme_lists_the_sensor_set_signals():
         {f"sample.{f}" for f in ALL_SENSOR_FIELDS}
 
 
+RUN_PLAN = """name: hall stuck run
+overrides: {initial: {speed_rad_s: 100.0}}
+steps:
+  - wait_until: {signal: sample.hall, comparison: at_least, value: 2, timeout_s: 0.05}
+  - mark: b_on
+  - fault: {name: hall_stuck, sensor: b, level: 0}
+  - run: {duration_s: 0.01}
+  - check:
+      name: Hall word while B is stuck low
+      kind: bound
+      signal: sample.hall
+      window: {from: b_on, offset_s: 0.0001}
+      limits: {low: 1, high: 5, unit: "1"}
+  - check: {name: winding temperature, kind: statistic, statistic: max,
+            signal: plant.winding_temperature_degc, role: finding}
+"""
+
+
+def test_a_plan_waits_on_checks_and_faults_a_sensor_set_signal(tmp_path):
+    """A plan on a sensor-set board: wait_until on sample.hall (read live) ends on the first
+    period Hall B is on; from the next period hall_stuck holds B low, which the reference
+    rotor (no fault) has high there; the plan's checks on sample.* pass."""
+    from hil.plans.outcome import Outcome
+    from hil.run.runner import run_plan
+
+    plan = parse_plan(RUN_PLAN, str(tmp_path / "plan.yaml"))
+    mask = mask_of(HALL_SET)
+    with FakeBoard(capabilities=SENSOR_CAPS, sensor_set=mask) as board:
+        result, signals = run_plan(plan, link=board.url, board=board_file(tmp_path, HALL_SET),
+                                   out_dir=tmp_path / "out", reports=False)
+    assert result.outcome is Outcome.PASS, result.reason
+    t, hall = signals["sample.hall"].t_s, signals["sample.hall"].values.astype(int)
+    period_s = load_profile().control_period_s
+    k_on = int(np.argmax(hall >= 2))
+    # the wait ends once period k_on is done: the mark and the fault at the next period
+    assert k_on > 0 and result.marks["b_on"] == pytest.approx(t[k_on + 1])
+    reference = [e["hall"] for e in reference_frames(len(hall), mask)]
+    assert list(hall[:k_on + 1]) == reference[:k_on + 1]
+    assert all(not h & 0b010 for h in hall[k_on + 1:])
+    assert all(h == r & ~0b010 for h, r in zip(hall[k_on + 1:], reference[k_on + 1:]))
+    assert reference[k_on + 1] & 0b010 and len(hall) * period_s > 0.01
+
+
 def test_default_sample_log_has_no_sensor_set_channel(tmp_path):
     """A SAMPLE board's log keeps its channels: no /plant/sample_sensors topic."""
     from hil.logs.commands import log_info
