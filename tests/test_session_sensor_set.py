@@ -217,6 +217,25 @@ def test_hall_stuck_fault_shows_in_the_frame_the_board_gets(tmp_path):
     assert list(recorded) == hall
 
 
+def test_bemf_comparator_stuck_shows_in_the_frame_the_board_gets(tmp_path):
+    """bemf_comparator_stuck c at 1 from period 60, lifted at period 150 (duration_s): bit 2 of
+    the comparator word is 1 in between, the reference's elsewhere; the other bits untouched."""
+    names = ("terminal_voltages", "bemf_comparators")
+    mask = mask_of(names)
+    with FakeBoard(capabilities=SENSOR_CAPS, sensor_set=mask) as board:
+        with session(board.url, board_file(tmp_path, names)) as s:
+            s.run_periods(60)
+            injector(s).inject("bemf_comparator_stuck", phase="c", level=1,
+                               duration_s=90 * s.period_s)
+            s.run_periods(PERIODS - 60)
+        rows = received_rows([m for m in board.received if isinstance(m, SampleSensors)])
+    expected = [e["bemf_comparators"] for e in reference_frames(PERIODS, mask)]
+    got = [rows[k]["bemf_comparators"] for k in range(PERIODS)]
+    assert got[:60] == expected[:60] and got[150:] == expected[150:]
+    assert got[60:150] == [e | 0b100 for e in expected[60:150]]
+    assert any(not e & 0b100 for e in expected[60:150])       # the fault changed words
+
+
 def test_hall_stuck_arguments_are_checked_at_the_boundary():
     with FakeBoard(capabilities=SENSOR_CAPS, sensor_set=mask_of(["hall"])) as board:
         with session(board.url) as s:
