@@ -443,6 +443,26 @@ def test_a_plan_waits_on_checks_and_faults_a_sensor_set_signal(tmp_path):
     assert reference[k_on + 1] & 0b010 and len(hall) * period_s > 0.01
 
 
+def test_limit_formulas_read_the_thermal_model():
+    """A stall plan's limits from the profile's thermal model: thermal.* with degC, K/W, J/K
+    (the winding's steady rise R_th P and its time constant R_th C_th, by hand)."""
+    from hil.plans.formula import FormulaError, evaluate
+    from hil.plans.plan_formulas import profile_values
+
+    values = profile_values(load_profile(overrides={"thermal": {
+        "enabled": True, "thermal_resistance_k_per_w": 1.5, "thermal_capacitance_j_per_k": 40.0,
+        "ambient_degc": 30.0}}))
+    values["copper_loss"] = (12.0, "W")
+    steady = evaluate("thermal.ambient_degc + thermal.thermal_resistance_k_per_w * copper_loss",
+                      values, "degC")
+    assert steady.value == pytest.approx(30.0 + 1.5 * 12.0) and steady.unit == "degC"
+    tau = evaluate("thermal.thermal_resistance_k_per_w * thermal.thermal_capacitance_j_per_k",
+                   values, "s")
+    assert tau.value == pytest.approx(60.0)
+    with pytest.raises(FormulaError, match="adds K and"):
+        evaluate("thermal.ambient_degc + copper_loss", values, "degC")
+
+
 def test_default_sample_log_has_no_sensor_set_channel(tmp_path):
     """A SAMPLE board's log keeps its channels: no /plant/sample_sensors topic."""
     from hil.logs.commands import log_info
