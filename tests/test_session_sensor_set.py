@@ -165,6 +165,40 @@ def test_board_without_the_capability_still_gets_todays_sample():
     assert "plant.winding_temperature_degc" not in signals
 
 
+THERMAL = {**OVERRIDES, "thermal": {"enabled": True, "thermal_capacitance_j_per_k": 0.5}}
+
+
+def gates_for(k: int) -> int:
+    """A then B low for 20 periods (the current rises through A-B), then all off."""
+    return 0x09 if k < 20 else 0
+
+
+def test_sample_board_on_a_thermal_profile_logs_the_winding_temperature():
+    """A SAMPLE board on a profile whose thermal model is on: still SAMPLE, and the winding
+    temperature is logged every period, equal to the reference plant's (heating while the
+    current flows)."""
+    def answer(msg, encoder):
+        return encoder.encode(Gates(period=msg.period, gates=gates_for(msg.period)))
+
+    with FakeBoard(capabilities=CAP_GATES, on_sample=answer) as board:
+        config = SessionConfig(link=board.url, policy=FAST, hold_cpu_latency=False)
+        with BenchSession(load_profile(overrides=THERMAL), config) as s:
+            s.run_periods(60)
+            signals = s.recorder.arrays()
+        got = [m for m in board.received if isinstance(m, (Sample, SampleSensors))]
+    assert got and all(type(m) is Sample for m in got)
+    plant = Plant(load_profile(overrides=THERMAL), seed=0)
+    expected = []
+    for k in range(60):
+        plant.sample()
+        expected.append(plant.winding_temperature_degc)
+        plant.step(gates_for(k))
+    t, recorded, unit = signals["plant.winding_temperature_degc"]
+    assert list(recorded) == expected and unit == "degC"
+    assert recorded[-1] > recorded[0] + 1e-3            # it heated
+    assert not [n for n in signals if n.startswith("sample.")]
+
+
 def test_board_whose_set_differs_from_its_board_file_is_refused_naming_both(tmp_path):
     with FakeBoard(capabilities=SENSOR_CAPS, sensor_set=mask_of(["current_a", "hall"])) as board:
         with pytest.raises(SessionError) as err:
@@ -385,6 +419,13 @@ def test_plan_naming_a_sensor_the_board_lacks_is_refused_before_the_run(tmp_path
     assert "sample.hall" in text and "'hall'" in text and ":4" in text and "plan.yaml" in text
     with pytest.raises(ConfigError, match="no sensors: list"):
         check_plan_board(plan, load_board(board_file(tmp_path)))
+    # the winding temperature: on a sensor-set board, or a profile whose thermal model is on
+    warm = parse_plan(PLAN.replace("sample.hall", "plant.winding_temperature_degc"),
+                      str(tmp_path / "plan.yaml"))
+    check_plan_board(warm, load_board(board_file(tmp_path, ["hall"])))
+    check_plan_board(warm, load_board(board_file(tmp_path)), load_profile(overrides=THERMAL))
+    with pytest.raises(ConfigError, match="thermal model"):
+        check_plan_board(warm, load_board(board_file(tmp_path)), load_profile())
 
 
 def test_readme_lists_the_sensor_set_signals():
