@@ -113,7 +113,8 @@ def test_plant_hall_word_follows_the_rotor_and_stuck_sensors():
 # ------------------------------------------------------------- terminal voltages
 def test_terminal_filter_step_response_is_one_minus_exp():
     """At rest with every leg off the terminals read 0 V; V1 from t_0 steps phase a to v_dc:
-    the filtered voltage is v_dc (1 - exp(-k T / tau)) k periods later."""
+    the filtered voltage is v_dc (1 - exp(-k T / tau)) k periods later, whether a frame was
+    asked for every period or, later, only now and then."""
     tau = 0.7e-3
     p = quiet(sensors={"terminal": {"filter_time_constant_s": tau}})
     plant = Plant(p)
@@ -123,11 +124,14 @@ def test_terminal_filter_step_response_is_one_minus_exp():
     assert (f.adc_va, f.adc_vb, f.adc_vc) == (0, 0, 0)
     for k in range(1, 80):
         plant.step(gates=V1)
+        if k > 30 and k not in (33, 40, 52, 79):
+            continue
         f = plant.sensor_frame()
         expected = vdc * (1.0 - math.exp(-k * T / tau))
         assert plant.sensors.terminal.filtered_v[0] == pytest.approx(expected, rel=1e-12, abs=1e-12)
         assert f.adc_va == math.floor(expected / p.sensors.terminal.v_per_count + 0.5)
         assert plant.sensors.terminal.filtered_v[1:] == [0.0, 0.0]
+    assert "step" not in plant.__dict__         # frames add no period hook
 
 
 def test_floating_phase_reads_star_point_plus_back_emf():
@@ -169,6 +173,24 @@ def test_floating_phase_reads_star_point_plus_back_emf():
         assert f.adc_vc == math.floor(analytic / p.sensors.terminal.v_per_count + 0.5)
         seen.append(v[2])
     assert max(seen) - min(seen) > 5.0      # the back-EMF moved the floating terminal
+
+
+def test_floated_duty_leg_under_a_period_hook_reads_the_star_point():
+    """DUTY_LEGS with leg c floated, on a plant whose thermal model hooks every step, rotor
+    locked (no back-EMF: with one, a floated leg's diodes conduct whenever a and b are both
+    high or both low): a and b average d v_dc over the period, c the star point
+    (d_a + d_b) v_dc / 2."""
+    p = quiet(load={"locked": True}, thermal={"enabled": True})
+    plant = Plant(p)
+    vdc = p.dc_link.source_voltage_v
+    plant.sensor_frame()
+    for k in range(50):
+        plant.step(duty=(0.7, 0.2, 0.5), legs=0b011)
+        plant.sensor_frame()
+        v = plant.sensors.terminal.filtered_v
+        assert abs(plant.truth()[F["i_c"]]) < 1e-9
+        assert plant.truth()[F["i_a"]] > 0.1 * (k + 1) / 50
+        assert v == pytest.approx([0.7 * vdc, 0.2 * vdc, 0.45 * vdc], rel=1e-14), k
 
 
 def test_bemf_comparators_flip_where_the_closed_form_says():
@@ -407,3 +429,18 @@ def test_bad_sensor_set_keys_are_refused_naming_the_key(section, value, words):
 def test_bad_thermal_key_is_refused():
     with pytest.raises(ConfigError, match="thermal_capacitance_j_per_k"):
         load_profile(overrides={"thermal": {"thermal_capacitance_j_per_k": 0.0}})
+
+
+def test_stuck_levels_are_checked_where_a_fault_sets_them():
+    plant = Plant(quiet())
+    for levels in (plant.sensors.hall.stuck, plant.sensors.terminal.comparator_stuck):
+        for bad in (2, -1, 0.5, "1"):
+            with pytest.raises(ValueError, match="None, 0 or 1"):
+                levels[0] = bad
+        with pytest.raises(ValueError, match="exactly three"):
+            levels[:] = [1, 1]
+        with pytest.raises(TypeError):
+            levels.append(1)
+        assert list(levels) == [None, None, None]
+        levels[2] = 1
+        assert list(levels) == [None, None, 1]
