@@ -113,11 +113,8 @@ def test_board_gets_sample_sensors_with_exactly_its_set_and_the_plants_values(tm
     assert list(signals["sample.hall"][1]) == [rows[k]["hall"] for k in range(PERIODS)]
     assert list(signals["sample.adc_ic"][1]) == [rows[k]["adc_ic"] for k in range(PERIODS)]
     assert "plant.winding_temperature_degc" in signals
-    # the temperature sensor's scaling pushed from the profile (SPEC 8, ids 17 and 18)
-    sensors = load_profile().sensors
-    assert board.params[17] == np.float32(sensors.temperature.degc_per_count)
-    assert board.params[18] == np.float32(sensors.temperature.offset_counts)
-    assert 14 not in board.params              # no terminal voltages in this set
+    # SPEC 8.1: a sensor's scaling is not pushed unasked (it is the board file's settings)
+    assert not {14, 15, 16, 17, 18} & set(board.params)
 
 
 def test_a_resend_is_the_same_sample_sensors(tmp_path):
@@ -386,7 +383,7 @@ def test_board_file_sensors_key(tmp_path):
     board = load_board(board_file(tmp_path, ["current_a", "hall", "terminal_voltages"]))
     assert board.sensors == ("current_a", "hall", "terminal_voltages")
     assert board.sensor_set == 0x0001 | 0x0020 | 0x0040
-    assert "terminal_v_per_count" in board.parameters      # the sensor's scaling is pushed
+    assert "terminal_v_per_count" not in board.parameters  # listed under standard if taken
     assert load_board(board_file(tmp_path)).sensor_set == 0
     assert load_board(board_file(tmp_path, [])).sensor_set == 0
 

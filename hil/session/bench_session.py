@@ -242,7 +242,7 @@ class BenchSession:
             self._handshake()
             self._start_sensor_set()
             self._push_parameters(board_parameters(self.profile, self.board,
-                                                   self.profile_label, self.sensor_set))
+                                                   self.profile_label))
         except SessionError as exc:
             self.plant.safe_state()
             self.error = str(exc)
