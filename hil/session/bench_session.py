@@ -375,9 +375,9 @@ class BenchSession:
 
     def _start_sensor_set(self) -> None:
         """SPEC 6.13: a board with the SENSOR_SET capability says its set (checked against its
-        board file); it gets SAMPLE_SENSORS from the plant's sensor frame from now on. Either
-        board's periods run in this module's Python loop when they log the winding
-        temperature (a sensor set, or the profile's thermal model on)."""
+        board file); it gets SAMPLE_SENSORS from the plant's sensor frame from now on. Its
+        periods, and a SAMPLE board's on a profile whose thermal model is on (the winding
+        temperature logged from Python), run in the Python period loop."""
         self.sensor_set = read_sensor_set(self)
         if self.sensor_set is None:
             if self.profile.thermal.enabled:    # the winding temperature, logged per period
