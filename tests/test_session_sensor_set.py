@@ -366,6 +366,13 @@ def test_sample_sensors_sizes_follow_the_spec_table():
     assert sample_sensors_can_dlc(mask_of(["hall"])) == (8, 2)
     with pytest.raises(ValueError, match="reserved"):
         sample_sensors_payload_bytes(0x0400)
+    # a lockstep period through a wire of 250 us each way at 2 Mbaud (10 bits a byte): the
+    # 39-byte SAMPLE_SENSORS out (195 us) and the 13-byte GATES back (65 us)
+    from hil.links.wire import parse_wire
+
+    wire = parse_wire("fixed-250us")
+    assert wire.lockstep_period_s(sensor_set=ALL_SENSORS) == pytest.approx(760e-6)
+    assert wire.lockstep_period_s() == pytest.approx(250e-6 + 95e-6 + 65e-6 + 250e-6)
 
 
 def test_link_tap_carries_the_frame_the_wire_model_sizes(tmp_path):

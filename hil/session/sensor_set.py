@@ -6,7 +6,9 @@ SENSOR_SET (a u16 bit mask in a float32). The session reads it with PARAM_GET un
 waits and tries, refuses an answer that is not a finite integer mask without reserved bits, and
 refuses a board whose set differs from its board file's ``sensors:`` (naming both sets). From
 then on the board gets SAMPLE_SENSORS instead of SAMPLE: the plant's SensorFrame (every sensor
-computed) with only the set's fields, the others 0 as a receiver decodes them.
+computed) with only the set's fields, the others 0 as a receiver decodes them. The same
+sampler logs the plant's winding temperature for a SAMPLE board on a profile whose thermal
+model is on.
 """
 from __future__ import annotations
 
