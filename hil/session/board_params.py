@@ -33,7 +33,9 @@ def board_parameters(profile, board: BoardFile | None = None,
                      profile_label: str | None = None) -> list[Setting]:
     """What the session pushes, in order: the required parameters (values from the profile),
     then the board's settings. A setting of a required parameter replaces its value at its
-    place (e.g. a board that assumes the nominal current zero and calibrates it itself)."""
+    place (e.g. a board that assumes the nominal current zero and calibrates it itself). A
+    sensor set's scaling (TERMINAL_V_PER_COUNT, ...) is not required (SPEC 8.1): a board that
+    takes it lists it in its board file's settings."""
     pushed: dict[str, Setting] = {name: Setting(name, value)
                                   for name, value in required_values(profile).items()}
     for setting in (board or spec_board()).settings_for(profile_label):
