@@ -22,7 +22,9 @@ hs_pair hs_commutation(uint8_t sector) { return commutation_table[(unsigned)(sec
 
 float hs_pair_current(const float phase_current_a[3], hs_pair pair)
 {
-    return 0.5f * (phase_current_a[pair.high] - phase_current_a[pair.low]);
+    /* three currents summing to 0: the largest magnitude is half the sum of magnitudes */
+    float largest = 0.5f * (fabsf(phase_current_a[0]) + fabsf(phase_current_a[1]) + fabsf(phase_current_a[2]));
+    return phase_current_a[pair.high] - phase_current_a[pair.low] < 0.0f ? -largest : largest;
 }
 
 float hs_torque_constant(uint32_t pole_pairs, float magnet_flux_wb) { return 2.0f * (float)pole_pairs * magnet_flux_wb; }
@@ -33,9 +35,48 @@ void hs_hall_speed_reset(hs_hall_speed *s)
 {
     s->sector = 0u;
     s->direction = 0;
+    s->intervals = 0u;
     s->periods_since_edge = 0u;
-    s->interval_periods = 0u;
+    for (unsigned i = 0u; i < HS_SPEED_WINDOW_EDGES; i++) {
+        s->interval_periods[i] = 0u;
+    }
     s->speed_rad_s = 0.0f;
+}
+
+/* One edge in `edge` direction: a whole interval when the previous edge was one
+ * in the same direction, else the window starts again. */
+static void hall_speed_edge(hs_hall_speed *s, int edge, float edge_angle, float dt_s)
+{
+    if (edge != 0 && edge == s->direction) {
+        for (unsigned i = HS_SPEED_WINDOW_EDGES - 1u; i > 0u; i--) {
+            s->interval_periods[i] = s->interval_periods[i - 1u];
+        }
+        s->interval_periods[0] = s->periods_since_edge;
+        if (s->intervals < HS_SPEED_WINDOW_EDGES) {
+            s->intervals++;
+        }
+        uint32_t window = 0u;
+        for (unsigned i = 0u; i < s->intervals; i++) {
+            window += s->interval_periods[i];
+        }
+        s->speed_rad_s = (float)edge * (float)s->intervals * edge_angle / ((float)window * dt_s);
+    } else {
+        /* the first edge, a reversal inside a sector, or a jumped sector: the time
+         * since the previous edge is not one sector's crossing */
+        s->intervals = 0u;
+        s->speed_rad_s = 0.0f;
+    }
+    s->direction = (int8_t)edge;
+    s->periods_since_edge = 0u;
+}
+
+static uint32_t longest_interval(const hs_hall_speed *s)
+{
+    uint32_t longest = 0u;
+    for (unsigned i = 0u; i < s->intervals; i++) {
+        longest = s->interval_periods[i] > longest ? s->interval_periods[i] : longest;
+    }
+    return longest;
 }
 
 int hs_hall_speed_step(hs_hall_speed *s, uint8_t sector, uint32_t pole_pairs, float dt_s)
@@ -48,28 +89,18 @@ int hs_hall_speed_step(hs_hall_speed *s, uint8_t sector, uint32_t pole_pairs, fl
     if (sector != 0u && s->sector != 0u && sector != s->sector) {
         unsigned step = (unsigned)(sector + 6u - s->sector) % 6u;
         edge = step == 1u ? 1 : (step == 5u ? -1 : 0);
-        if (edge != 0 && edge == s->direction) {
-            /* a whole sector crossed in one direction: an interval */
-            s->interval_periods = s->periods_since_edge;
-            s->speed_rad_s = (float)edge * edge_angle / ((float)s->interval_periods * dt_s);
-        } else {
-            /* the first edge, a reversal inside a sector, or a jumped sector:
-             * the time since the previous edge is not one sector's crossing */
-            s->interval_periods = 0u;
-            s->speed_rad_s = 0.0f;
-        }
-        s->direction = (int8_t)edge;
-        s->periods_since_edge = 0u;
+        hall_speed_edge(s, edge, edge_angle, dt_s);
     }
     if (sector != 0u) {
         s->sector = sector;
     }
-    if (edge == 0 && s->periods_since_edge > 0u) {
+    if (s->periods_since_edge > 0u) {
         float elapsed = (float)s->periods_since_edge * dt_s;
         if (elapsed > HS_SPEED_ZERO_AFTER_S) {
             s->speed_rad_s = 0.0f;
-        } else if (s->periods_since_edge > s->interval_periods) {
-            /* overdue: no faster than one edge angle over the time since the last edge */
+        } else if (s->intervals > 0u && s->periods_since_edge > longest_interval(s)) {
+            /* overdue (later than any interval in the window): no faster than one edge
+             * angle over the time since the last edge */
             float cap = edge_angle / elapsed;
             s->speed_rad_s = clampf(s->speed_rad_s, -cap, cap);
         }

@@ -31,10 +31,10 @@
  * parameter: a user sets it for their drive here, or pushes the PI gains. */
 #define HS_DESIGN_INERTIA_KGM2 2.0e-5f
 /* Speed loop: closed-loop double pole at this frequency (hs_speed_pi_design). */
-#define HS_SPEED_BANDWIDTH_HZ 20.0f
+#define HS_SPEED_BANDWIDTH_HZ 10.0f
 /* Current loop: the PI cancels the pair's L/R pole, closed loop first order at this frequency. */
 #define HS_CURRENT_BANDWIDTH_HZ 1000.0f
-#define HS_DEFAULT_TORQUE_LIMIT_NM 0.3f
+#define HS_DEFAULT_TORQUE_LIMIT_NM 0.1f
 #define HS_DEFAULT_OVERCURRENT_A 15.0f
 /* No Hall edge for this long while at least half the torque limit is asked
  * for: the rotor is stalled (or the sensors are blind). */
@@ -65,8 +65,13 @@ typedef struct {
 } hs_pair;
 hs_pair hs_commutation(uint8_t sector);
 
-/* Pair current (A, positive into `high` and out of `low`): the mean of the two
- * measured phase currents, so ADC noise averages. */
+/* Torque-producing current of the pair (A, positive into `high` and out of
+ * `low`): the largest phase current, signed as the pair current. In a sector it
+ * is the pair's current; while the outgoing phase's current decays after a
+ * commutation it is the current of the phase common to both pairs, the one
+ * whose back-EMF (+-E, with the outgoing phase still near its flat top) carries
+ * the torque, T = 2 E i_common / w_m. Regulating it keeps the torque through the
+ * commutation. */
 float hs_pair_current(const float phase_current_a[3], hs_pair pair);
 
 /* Torque per ampere of pair current with 120-degree flat-top trapezoidal
@@ -77,14 +82,20 @@ float hs_torque_constant(uint32_t pole_pairs, float magnet_flux_wb);
 /* ---- Hall speed ----------------------------------------------------------- */
 
 /* Speed from the time between Hall edges: each edge is 60 electrical degrees,
- * (pi / 3) / p mechanical radians. Times are counted in periods, so every
- * machine computes the same estimate. */
+ * (pi / 3) / p mechanical radians. The estimate spans the last three edge
+ * intervals (half an electrical turn), so its two ends are edges of the same
+ * sensor: that sensor's placement error and its hysteresis (both edges h/2 late
+ * in the direction of motion) cancel. Until three intervals are seen (after the
+ * start or a reversal) it spans those there are. Times are counted in periods,
+ * so every machine computes the same estimate. */
+#define HS_SPEED_WINDOW_EDGES 3u
 typedef struct {
-    uint8_t sector;               /* last legal sector, 0 before the first */
-    int8_t direction;             /* +1 / -1 of the last edge, 0 when none (or after a jump) */
-    uint32_t periods_since_edge;  /* periods since the last edge (or since the first sample) */
-    uint32_t interval_periods;    /* periods between the last two edges in one direction, 0 when none */
-    float speed_rad_s;            /* mechanical, signed */
+    uint8_t sector;              /* last legal sector, 0 before the first */
+    int8_t direction;            /* +1 / -1 of the last edge, 0 when none (or after a jump) */
+    uint8_t intervals;           /* whole intervals in the window, 0 .. HS_SPEED_WINDOW_EDGES */
+    uint32_t periods_since_edge; /* periods since the last edge (or since the first sample) */
+    uint32_t interval_periods[HS_SPEED_WINDOW_EDGES]; /* newest first */
+    float speed_rad_s;           /* mechanical, signed */
 } hs_hall_speed;
 
 void hs_hall_speed_reset(hs_hall_speed *s);
