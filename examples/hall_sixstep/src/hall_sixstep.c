@@ -200,8 +200,9 @@ int hs_stall_watch_step(hs_stall_watch *w, int edge, float torque_ref_nm, float 
     if (w->silent_periods < UINT32_MAX) {
         w->silent_periods++;
     }
-    /* NaN fails the comparison: no demand counted, but the firmware trips
-     * NON_FINITE on such a reference before it gets here */
+    /* NaN fails the comparison (no demand counted); the firmware's torque
+     * reference is finite: a non-finite COMMAND is refused with FAULT 6, and PARAM_SET
+     * refuses non-finite gains */
     if (fabsf(torque_ref_nm) >= 0.5f * torque_limit_nm) {
         if (w->demand_periods < UINT32_MAX) {
             w->demand_periods++;
