@@ -188,7 +188,7 @@ def test_param_set_names_follow_the_protocol_header():
     # SPEC 8: ids 1-59 are standard, 60 and up a board's own (the stub's are in its board file)
     standard = {name.lower() for name, pid in ids if int(pid) < 60}
     assert "control_step_cycles" in standard
-    assert set(BOARD_PARAMS) == standard - {"control_step_cycles"}
+    assert set(BOARD_PARAMS) == standard - {"control_step_cycles", "sensor_set"}   # read-only
 
 
 def test_param_set_errors(tmp_path):

@@ -261,7 +261,7 @@ static int sample_sensors_size(uint16_t sensor_set)
     }
     int n = (int)HIL_SAMPLE_SENSORS_FIXED_SIZE;
     for (unsigned i = 0; i < SENSOR_SET_BITS; i++) {
-        if ((sensor_set >> i) & 1u) {
+        if ((((uint32_t)sensor_set >> i) & 1u) != 0u) {
             n += sensor_bit_size[i];
         }
     }
@@ -291,7 +291,7 @@ static void sample_sensors_put(uint8_t *p, const hil_sample_sensors *s)
     p += HIL_SAMPLE_SENSORS_FIXED_SIZE;
     const uint16_t currents[3] = {s->adc_ia, s->adc_ib, s->adc_ic};
     for (unsigned i = 0; i < 3u; i++) {
-        if ((set & (HIL_SENSOR_CURRENT_A << i)) != 0u) {
+        if (((uint32_t)set & (HIL_SENSOR_CURRENT_A << i)) != 0u) {
             put_u16(p, currents[i]);
             p += 2;
         }
@@ -339,7 +339,7 @@ static void sample_sensors_get(const uint8_t *p, hil_sample_sensors *s)
     p += HIL_SAMPLE_SENSORS_FIXED_SIZE;
     uint16_t *const currents[3] = {&s->adc_ia, &s->adc_ib, &s->adc_ic};
     for (unsigned i = 0; i < 3u; i++) {
-        if ((set & (HIL_SENSOR_CURRENT_A << i)) != 0u) {
+        if (((uint32_t)set & (HIL_SENSOR_CURRENT_A << i)) != 0u) {
             *currents[i] = get_u16(p);
             p += 2;
         }
