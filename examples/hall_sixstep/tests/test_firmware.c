@@ -101,10 +101,10 @@ typedef struct {
     uint8_t hall;
 } sensors;
 
-/* SAMPLE_SENSORS (type 0x10) frame of the board's set, built from SPEC.md 6.13. */
-static size_t sample_sensors_frame(const sensors *s, uint8_t *wire)
+/* SAMPLE_SENSORS (type 0x10) of the board's set, built from SPEC.md 6.13: header,
+ * payload and CRC (before COBS); returns its length. */
+static size_t sample_sensors_raw(const sensors *s, uint8_t seq, uint8_t *raw)
 {
-    uint8_t raw[64];
     size_t n = 4;
     raw[n++] = (uint8_t)s->period;
     raw[n++] = (uint8_t)(s->period >> 8);
@@ -129,11 +129,18 @@ static size_t sample_sensors_frame(const sensors *s, uint8_t *wire)
     }
     raw[0] = 1u;    /* version */
     raw[1] = 0x10u; /* SAMPLE_SENSORS */
-    raw[2] = bench_seq++;
+    raw[2] = seq;
     raw[3] = (uint8_t)(n - 4u);
     uint16_t crc = crc16(raw, n);
     raw[n++] = (uint8_t)crc;
     raw[n++] = (uint8_t)(crc >> 8);
+    return n;
+}
+
+static size_t sample_sensors_frame(const sensors *s, uint8_t *wire)
+{
+    uint8_t raw[64];
+    size_t n = sample_sensors_raw(s, bench_seq++, raw);
     return cobs(raw, n, wire);
 }
 
@@ -194,6 +201,19 @@ static void abi_version_and_create_refusals(void **state)
     assert_null(hil_fw_create(base + off, hil_fw_instance_size() - 1u)); /* too small */
     assert_null(hil_fw_create(base + off + 8u, sizeof mem - 32u));       /* misaligned */
     assert_null(hil_fw_create(NULL, 0u));
+}
+
+/* The frames these tests send are the SPEC's: the hand-built vector hb_sample_sensors_hall
+ * (protocol/vectors/handbuilt.txt, this board's set) byte for byte. */
+static void frame_builder_matches_the_handbuilt_vector(void **state)
+{
+    (void)state;
+    static const uint8_t vector[] = {0x01, 0x10, 0x15, 0x10, 0x70, 0x11, 0x01, 0x00, 0x2f, 0x00, 0x00,
+                                     0x34, 0x08, 0xc6, 0x07, 0x06, 0x08, 0xd7, 0x03, 0x03, 0x68, 0xb4};
+    sensors s = {70000u, SET_CURRENTS_VDC_HALL, 0u, 2100u, 1990u, 2054u, 983u, 3u};
+    uint8_t raw[64];
+    assert_int_equal(sample_sensors_raw(&s, 21u, raw), sizeof vector);
+    assert_memory_equal(raw, vector, sizeof vector);
 }
 
 /* HELLO declares SENSOR_SET (0x0020) + DUTY_LEGS (0x0010) + TELEMETRY (0x0004); the
@@ -419,6 +439,7 @@ int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(abi_version_and_create_refusals),
+        cmocka_unit_test(frame_builder_matches_the_handbuilt_vector),
         cmocka_unit_test(hello_declares_the_sensor_set),
         cmocka_unit_test(sample_sensors_commutates_on_the_hall_word),
         cmocka_unit_test(illegal_hall_word_trips_encoder_loss),
