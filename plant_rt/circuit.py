@@ -27,6 +27,8 @@ continuous but not smooth, so an RK4 step across it would lose its order (1e-4 o
 against the switched-circuit reference before; the step now ends there, nothing changes state).
 This is what makes the safe state at 3000 rpm decay to zero and then stay there while the line
 back-EMF is below the 70 V link.
+With a trapezoidal back-EMF (plant_rt.motor) the trapezoid's corners, where d e/dt jumps, end
+a step in the same way as a knee (the rhs is then _rhs_shaped).
 
 The load torque within an interval is the linear piece set by set_load_segment (the plant cuts
 its intervals at the profile's knots), plus the speed term.
