@@ -14,6 +14,7 @@ bootstrap-run:
 
 run: bootstrap-run
 	.venv/bin/hil run test_plans/ --out $(OUT)
+	.venv/bin/hil run examples/hall_sixstep/plans --link lib:examples/hall_sixstep/build/libhall_sixstep.so --out $(OUT)/hall_sixstep
 
 test: bootstrap
 	$(MAKE) -s -C protocol/c test
