@@ -62,7 +62,8 @@ class Nameplate:
 
 @dataclass
 class Derived:
-    """What the plans' limits are made of; `lines` says how each was computed."""
+    """The nameplate's derived quantities, printed and in the README (`lines` says how each was
+    computed); the plans compute theirs from profile.yaml and the board file."""
 
     psi_wb: float
     ld_h: float
