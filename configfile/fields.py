@@ -21,7 +21,8 @@ _NUMBER = re.compile(r"^[+-]?(\d+(\.\d*)?|\.\d+)([eE][+-]?\d+)?$")
 def param(default: Any, *, gt: float | None = None, ge: float | None = None,
           lt: float | None = None, le: float | None = None,
           choices: tuple[str, ...] | None = None, kind: str | None = None) -> Any:
-    """A dataclass field with bounds (gt/ge/lt/le), allowed strings or a special kind ("table")."""
+    """A dataclass field with bounds (gt/ge/lt/le), allowed strings or a special kind
+    ("table": [t, value] rows; "triple": three numbers, one per phase, each within the bounds)."""
     meta = {"gt": gt, "ge": ge, "lt": lt, "le": le, "choices": choices, "kind": kind}
     if isinstance(default, (list, tuple)):
         return dataclasses.field(default_factory=lambda: tuple(default), metadata=meta)
@@ -77,6 +78,12 @@ def _table(value: Any) -> tuple[tuple[float, float], ...]:
     return tuple(rows)
 
 
+def _triple(value: Any) -> tuple[float, float, float]:
+    if not isinstance(value, (list, tuple)) or len(value) != 3:
+        raise ValueError(f"expected a list of three numbers (phases a, b, c), got {value!r}")
+    return to_float(value[0]), to_float(value[1]), to_float(value[2])
+
+
 def coerce(cls: type, name: str, value: Any) -> Any:
     """Converts `value` to the type of field `name` of dataclass `cls` and checks its bounds."""
     fields = field_map(cls)
@@ -88,6 +95,11 @@ def coerce(cls: type, name: str, value: Any) -> Any:
     ftype = f.type if isinstance(f.type, str) else getattr(f.type, "__name__", str(f.type))
     if kind == "table":
         return _table(value)
+    if kind == "triple":        # one number per phase, each within the field's bounds
+        values = _triple(value)
+        for n, v in enumerate(values):
+            _check_bounds(meta, v, f"element {n} ({v!r})")
+        return values
     if ftype == "bool":
         if not isinstance(value, bool):
             raise ValueError(f"expected true or false, got {value!r}")
@@ -105,9 +117,13 @@ def coerce(cls: type, name: str, value: Any) -> Any:
         result = to_float(value)
     else:
         raise TypeError(f"{cls.__name__}.{name}: unsupported field type {ftype}")
+    _check_bounds(meta, result, repr(value))
+    return result
+
+
+def _check_bounds(meta: Any, result: float, shown: str) -> None:
     for key, op, text in (("gt", float.__gt__, ">"), ("ge", float.__ge__, ">="),
                           ("lt", float.__lt__, "<"), ("le", float.__le__, "<=")):
         bound = meta.get(key)
         if bound is not None and not op(float(result), float(bound)):
-            raise ValueError(f"must be {text} {bound:g} (got {value!r})")
-    return result
+            raise ValueError(f"must be {text} {bound:g} (got {shown})")

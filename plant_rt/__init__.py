@@ -2,7 +2,8 @@
 advanced one control period at a time (see docs/plant.md)."""
 from plant_rt.plant import TRUTH_FIELDS, Plant
 from plant_rt.profile import BenchProfile, default_profile_path, load_profile
+from plant_rt.sensor_set import SensorFrame
 from plant_rt.sensors import SensorSample
 
 __all__ = ["Plant", "BenchProfile", "load_profile", "default_profile_path", "SensorSample",
-           "TRUTH_FIELDS"]
+           "SensorFrame", "TRUTH_FIELDS"]

@@ -213,6 +213,16 @@ class MotorModel:
             t += length
         return pa, pb, w, th, q / r
 
+    def phase_back_emf_v(self, theta_e_rad: float, omega_m_rad_s: float
+                         ) -> tuple[float, float, float]:
+        """Phase back-EMFs (e_a, e_b, e_c), V: the rate of change of the magnet's flux linkage
+        with each phase, e_x = -omega_e psi_m sin(theta_e - n_x 120 deg), omega_e = p omega_m,
+        n_a, n_b, n_c = 0, 1, 2 (so v_x - v_star = R i_x + L di_x/dt + e_x). Sinusoidal."""
+        amplitude = -self.p * omega_m_rad_s * self.psim
+        third = 2.0 * math.pi / 3.0
+        return (amplitude * sin(theta_e_rad), amplitude * sin(theta_e_rad - third),
+                amplitude * sin(theta_e_rad + third))
+
 
 def rk4_spm_step(p: float, ril: float, rk: float, kti: float, ij: float, bw: float, va: float,
                  vb: float, h: float, tl1: float, tl2: float, tl4: float, pa: float, pb: float,

@@ -45,7 +45,11 @@ from plant_rt.inverter import (
 from plant_rt.load import Load
 from plant_rt.motor import MotorModel
 from plant_rt.profile import BenchProfile
+from plant_rt.sensor_set import (
+    SensorFrame, SensorSet, driven_leg_voltages, low_side_conducts, terminal_voltages_v,
+)
 from plant_rt.sensors import STATUS_GATE_FAULT, STATUS_INDEX_PULSE, SensorSample, Sensors
+from plant_rt.thermal import ThermalModel
 from configfile.fields import coerce
 
 TWO_PI = 2.0 * pi
@@ -135,6 +139,18 @@ class Plant:
         self._timeline.kernel = self._ckernel
         self._bind_readout(self._ckernel)
         self._rebuild()
+        # Sensor sets (sensor_frame) and the thermal model: nothing runs per period until a
+        # frame is asked for or the profile enables the thermal model (_sensor_period).
+        self._sensor_set = SensorSet(profile.sensors, seed, self._T)
+        self._sensor_set.attach(self.sensors)
+        self._frame: SensorFrame | None = None
+        self._frame_sample: SensorSample | None = None
+        self._emf_start: tuple[float, float, float] | None = None
+        self._thermal = ThermalModel(profile.thermal, profile.motor.resistance_ohm, self._T)
+        self._thermal_on = profile.thermal.enabled
+        if self._thermal_on:
+            self._apply_winding_resistance()
+            self.add_period_hook(self._sensor_period, "after")
 
     @property
     def c_kernel(self) -> bool:
@@ -693,6 +709,86 @@ class Plant:
         self._sample_k = k
         return self._sample
 
+    def sensor_frame(self) -> SensorFrame:
+        """Every sensor of the sensor sets at t_k (the same object if called again in the same
+        period), with sample()'s period, status, adc_vdc and encoder. The first call starts the
+        terminal filters, settled at the present terminal voltages, and from then on advances
+        them once per period (_sensor_period)."""
+        sample = self.sample()
+        if self._frame_sample is sample:
+            return self._frame
+        sset = self._sensor_set
+        currents = self._phase_currents()
+        if self._emf_start is None:
+            self._emf_start = self._back_emf()
+            sset.terminal.start(self._terminal_voltages(currents, self._emf_start))
+            if self._sensor_period not in self._hooks["after"]:
+                self.add_period_hook(self._sensor_period, "after")
+        conducts = None
+        if sset.phase_currents.low_side:
+            tl = self._timeline
+            conducts = low_side_conducts(self._cmd, currents, tl.force_on, tl.force_off)
+        th = self._th
+        frame = sset.frame(sample, self.motor.p * th, th, currents, conducts,
+                           self._thermal.temperature_degc)
+        self._frame = frame
+        self._frame_sample = sample
+        return frame
+
+    @property
+    def winding_temperature_degc(self) -> float:
+        """The winding temperature (degC) of the thermal model (profile `thermal:`); without
+        it the winding stays at thermal.initial_degc."""
+        return self._thermal.temperature_degc
+
+    def _sensor_period(self, k: int) -> None:
+        """After every period (an 'after' hook, installed by the thermal model or the first
+        sensor_frame()): the thermal model, then the terminal filters, advance by the period
+        just ended."""
+        if self._thermal_on:
+            ia, ib, _, _ = self.motor.currents(self._pa, self._pb, self._th)
+            if self._zero_current:
+                ia = ib = 0.0
+            elif self._open_phase is not None:
+                ia, ib = _cut_phase(self._open_phase, ia, ib)[3:]
+            thermal = self._thermal
+            thermal.advance(thermal.copper_loss_w(ia, ib))
+            self._apply_winding_resistance()
+        if self._emf_start is not None:
+            start, end = self._emf_start, self._back_emf()
+            # e averaged over the period as the mean of its ends (second order in omega_e T)
+            emf = (0.5 * (start[0] + end[0]), 0.5 * (start[1] + end[1]), 0.5 * (start[2] + end[2]))
+            self._sensor_set.terminal.advance(self._terminal_voltages(self._phase_currents(), emf))
+            self._emf_start = end
+
+    def _apply_winding_resistance(self) -> None:
+        """The motor's resistance to the thermal model's R(T), when it moved by more than 1e-6
+        relative (a change rebuilds the plant's tables)."""
+        r = self._thermal.resistance_ohm()
+        if abs(r - self.motor.r) > 1e-6 * self.motor.r:
+            self.set_motor_param("resistance_ohm", r)
+
+    def _back_emf(self) -> tuple[float, float, float]:
+        return self.motor.phase_back_emf_v(self.motor.p * self._th, self._w)
+
+    def _phase_currents(self) -> tuple[float, float, float]:
+        """(i_a, i_b, i_c) at t_k, as truth() gives them."""
+        if self._zero_current:
+            return 0.0, 0.0, 0.0
+        ia, ib, _, _ = self.motor.currents(self._pa, self._pb, self._th)
+        if self._open_phase is not None:
+            return _cut_phase(self._open_phase, ia, ib)[:3]
+        return ia, -0.5 * ia + S32 * ib, -0.5 * ia - S32 * ib
+
+    def _terminal_voltages(self, currents: tuple[float, float, float],
+                           emf: tuple[float, float, float]) -> tuple[float, float, float]:
+        """The terminal voltages over the period just ended (sensor_set.terminal_voltages_v)
+        under the command in force (stuck switches applied to a gate word)."""
+        tl = self._timeline
+        vdc = self._vdc
+        driven = driven_leg_voltages(self._cmd, vdc, tl.force_on, tl.force_off)
+        return terminal_voltages_v(driven, currents, emf, vdc, self.inverter.device_drop_v)
+
     @property
     def last_sample(self) -> SensorSample | None:
         """The most recent sample() (None before the first)."""
@@ -938,11 +1034,11 @@ class Plant:
         if not (self._hooks["before"] or self._hooks["after"]):
             self.__dict__.pop("step", None)
 
-    def _hooked_step(self, gates: int | None = None, duty=None) -> None:
+    def _hooked_step(self, gates: int | None = None, duty=None, legs: int | None = None) -> None:
         k = self.period
         for fn in tuple(self._hooks["before"]):
             fn(k)
-        Plant.step(self, gates, duty)
+        Plant.step(self, gates, duty, legs)
         for fn in tuple(self._hooks["after"]):
             fn(k + 1)
 

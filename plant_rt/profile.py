@@ -26,6 +26,7 @@ from plant_rt.inverter import InverterParams
 from plant_rt.load import LoadParams
 from plant_rt.motor import MotorParams
 from plant_rt.sensors import SensorParams
+from plant_rt.thermal import ThermalParams
 from configfile.fields import coerce, param, to_float, type_hints
 
 
@@ -58,6 +59,7 @@ class BenchProfile:
     load: LoadParams = field(default_factory=LoadParams)
     sensors: SensorParams = field(default_factory=SensorParams)
     initial: InitialState = field(default_factory=InitialState)
+    thermal: ThermalParams = field(default_factory=ThermalParams)
     # How the bench talks to the board (waits, resends, watchdog: protocol/SPEC.md 2.8). Not
     # physics: plant_rt keeps it as data, the bench checks it (session_schema) and uses it.
     session: dict[str, Any] = field(default_factory=dict)

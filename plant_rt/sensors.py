@@ -31,6 +31,9 @@ import numpy as np
 
 from configfile.dataclass_methods import dataclass
 from configfile.fields import param
+from plant_rt.sensor_params import (
+    CURRENT_PLACEMENTS, HallParams, ResolverParams, TemperatureSensorParams, TerminalParams,
+)
 
 STATUS_INDEX_PULSE = 0x01
 STATUS_OVERCURRENT = 0x02
@@ -57,9 +60,11 @@ class SensorSample(NamedTuple):
 
 @dataclass(frozen=True)
 class CurrentSensorParams:
-    """The two phase-current channels: transducer and ADC."""
+    """The phase-current channels (SAMPLE's two, a sensor set's three): transducer and ADC;
+    placement of the three shunts, inline (always the phase current) or low_side."""
 
     phases: str = param("ab", choices=tuple(PHASE_PAIRS))
+    placement: str = param("inline", choices=CURRENT_PLACEMENTS)
     bits: int = param(12, ge=1, le=16)
     a_per_count: float = param(0.01220703125, gt=0)   # 25 A / 2048
     offset_counts: float = param(2048.0)
@@ -94,6 +99,10 @@ class SensorParams:
     current: CurrentSensorParams = field(default_factory=CurrentSensorParams)
     dc_voltage: VoltageSensorParams = field(default_factory=VoltageSensorParams)
     encoder: EncoderParams = field(default_factory=EncoderParams)
+    hall: HallParams = field(default_factory=HallParams)
+    terminal: TerminalParams = field(default_factory=TerminalParams)
+    resolver: ResolverParams = field(default_factory=ResolverParams)
+    temperature: TemperatureSensorParams = field(default_factory=TemperatureSensorParams)
     overcurrent_trip_a: float = param(20.0, gt=0)
     overvoltage_trip_v: float = param(90.0, gt=0)
 
@@ -380,10 +389,13 @@ class Encoder:
 
 
 class Sensors:
-    """The board's view: i1, i2 (two phase currents), vdc and the encoder."""
+    """The board's view: i1, i2 (two phase currents), vdc and the encoder. The sensor-set
+    models (plant_rt.sensor_set: phase_currents, hall, terminal, resolver, temperature) are
+    attached by the plant, so their faults sit beside these (sensors.hall.stuck[x])."""
 
     __slots__ = ("params", "i1", "i2", "vdc", "encoder", "overcurrent_trip_a",
-                 "overvoltage_trip_v", "_pair")
+                 "overvoltage_trip_v", "_pair", "phase_currents", "hall", "terminal", "resolver",
+                 "temperature")
 
     def __init__(self, params: SensorParams, seed: int):
         cur, vol = params.current, params.dc_voltage
@@ -398,6 +410,8 @@ class Sensors:
         self.overcurrent_trip_a = params.overcurrent_trip_a
         self.overvoltage_trip_v = params.overvoltage_trip_v
         self._pair = PHASE_PAIRS[cur.phases]
+        self.phase_currents = self.hall = self.terminal = self.resolver = None
+        self.temperature = None
 
     @property
     def phases(self) -> str:

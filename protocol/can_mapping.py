@@ -2,7 +2,7 @@
 
 identifier = base_id + 0x20 * sender_role + type. SAMPLE, GATES, DUTY and
 every payload of at most 8 bytes travel in one frame; HELLO, COMMAND,
-TELEMETRY and FAULT are split over numbered frames whose first data byte is
+TELEMETRY, FAULT and SAMPLE_SENSORS are split over numbered frames whose first data byte is
 (counter << 4) | index. The CAN CRC replaces the serial CRC, and there is no
 sequence number: SAMPLE carries the low 8 bits of its period, DUTY the low 16
 and DUTY_LEGS the low 13 (its leg enables take the word's top 3 bits), which
@@ -13,10 +13,10 @@ from __future__ import annotations
 import struct
 
 from protocol.codec import (
-    HELLO_FIXED_SIZE, MAX_PAYLOAD, PAYLOAD_SIZES, ProtocolError, decode_payload, encode_payload,
-    pack_adc40,
+    HELLO_FIXED_SIZE, MAX_PAYLOAD, PAYLOAD_SIZES, SAMPLE_SENSORS_FIXED_SIZE, ProtocolError, decode_payload,
+    encode_payload, pack_adc40, sample_sensors_size,
 )
-from protocol.messages import LEGS_ALL, NAME_MAX, Duty, DutyLegs, MsgType, Role, Sample
+from protocol.messages import LEGS_ALL, NAME_MAX, SENSOR_SET_ALL, Duty, DutyLegs, MsgType, Role, Sample
 
 DEFAULT_BASE_ID = 0x100
 ROLE_STRIDE = 0x20
@@ -25,8 +25,10 @@ CAN_ID_MAX = 0x7FF
 SEGMENT_DATA = 7        # payload bytes per segmented frame
 MAX_FRAMES = 16
 
-SEGMENTED_TYPES = frozenset({MsgType.HELLO, MsgType.COMMAND, MsgType.TELEMETRY, MsgType.FAULT})
-_FULL_PERIOD_TYPES = frozenset({MsgType.GATES, MsgType.TELEMETRY, MsgType.STATUS, MsgType.FAULT})
+SEGMENTED_TYPES = frozenset({MsgType.HELLO, MsgType.COMMAND, MsgType.TELEMETRY, MsgType.FAULT,
+                             MsgType.SAMPLE_SENSORS})
+_FULL_PERIOD_TYPES = frozenset({MsgType.GATES, MsgType.TELEMETRY, MsgType.STATUS, MsgType.FAULT,
+                                MsgType.SAMPLE_SENSORS})
 _KNOWN_TYPES = frozenset(int(t) for t in MsgType)
 
 _SAMPLE_CAN = struct.Struct("<BIBH")   # period low 8, adc40 low 32, adc40 high 8, encoder
@@ -238,6 +240,11 @@ class CanReassembler:
 
 def _expected_len(msg_type: int, buf: bytearray) -> int:
     """Payload length of a segmented message: 0 while not yet known, -1 when invalid."""
+    if msg_type == MsgType.SAMPLE_SENSORS:
+        if len(buf) < SAMPLE_SENSORS_FIXED_SIZE - 1:  # sensor_set is payload bytes 4-5
+            return 0
+        sensor_set = buf[4] | buf[5] << 8
+        return -1 if sensor_set & ~SENSOR_SET_ALL else sample_sensors_size(sensor_set)
     if msg_type != MsgType.HELLO:
         return PAYLOAD_SIZES[msg_type]
     if len(buf) < HELLO_FIXED_SIZE:

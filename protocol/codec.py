@@ -15,15 +15,15 @@ from __future__ import annotations
 import math
 import struct
 from binascii import crc_hqx
-from operator import attrgetter
+from operator import attrgetter, index
 
 from cobs.cobs import DecodeError as _CobsError
 from cobs.cobs import decode as _cobs_decode
 from cobs.cobs import encode as _cobs_encode
 
 from protocol.messages import (
-    NAME_MAX, PROTOCOL_VERSION, Command, Duty, DutyLegs, Fault, Gates, Heartbeat, Hello, MsgType, ParamGet,
-    ParamSet, ParamValue, Sample, Shutdown, Status, Telemetry,
+    NAME_MAX, PROTOCOL_VERSION, SENSOR_SET_ALL, Command, Duty, DutyLegs, Fault, Gates, Heartbeat, Hello,
+    MsgType, ParamGet, ParamSet, ParamValue, Sample, SampleSensors, Shutdown, Status, Telemetry,
 )
 
 HEADER_SIZE = 4
@@ -63,7 +63,52 @@ _STATUS = struct.Struct("<IBH")
 _FAULT = struct.Struct("<IHf")
 _HEARTBEAT = struct.Struct("<I")
 
-# Payload length of every fixed-size type; HELLO is 9 + name_len.
+# SAMPLE_SENSORS: a fixed part, then the fields of each set sensor-set bit in bit order (SPEC 6.13).
+_SAMPLE_SENSORS_FIXED = struct.Struct("<IHB")   # period, sensor_set, status
+SAMPLE_SENSORS_FIXED_SIZE = _SAMPLE_SENSORS_FIXED.size
+# (bit, fields, struct codes, largest value of each field: u8 fields with reserved bits are 0..7)
+SENSOR_FIELDS = (
+    (0x0001, ("adc_ia",), "H", 0xFFFF),
+    (0x0002, ("adc_ib",), "H", 0xFFFF),
+    (0x0004, ("adc_ic",), "H", 0xFFFF),
+    (0x0008, ("adc_vdc",), "H", 0xFFFF),
+    (0x0010, ("encoder",), "H", 0xFFFF),
+    (0x0020, ("hall",), "B", 0x07),
+    (0x0040, ("adc_va", "adc_vb", "adc_vc"), "HHH", 0xFFFF),
+    (0x0080, ("bemf_comparators",), "B", 0x07),
+    (0x0100, ("adc_resolver_sin", "adc_resolver_cos"), "HH", 0xFFFF),
+    (0x0200, ("adc_temperature",), "H", 0xFFFF),
+)
+_SENSOR_FIELD_NAMES = tuple(name for _, names, _, _ in SENSOR_FIELDS for name in names)
+SAMPLE_SENSORS_STATUS_MAX = 0x0F  # status bits 4-7 reserved
+
+
+def sample_sensors_size(sensor_set: int) -> int:
+    """Payload length of SAMPLE_SENSORS with ``sensor_set``: 7 + the bytes of each set bit's fields."""
+    return _sensor_layout(sensor_set)[0].size + SAMPLE_SENSORS_FIXED_SIZE
+
+
+_SENSOR_LAYOUTS: dict[int, tuple] = {}
+
+
+def _sensor_layout(sensor_set: int) -> tuple:
+    """(struct of the set bits' fields, their names, their indices among the 13 sensor fields,
+    their largest values) for a sensor set without reserved bits; built once per set."""
+    layout = _SENSOR_LAYOUTS.get(sensor_set)
+    if layout is None:
+        fmt, names, limits = "<", [], []
+        for bit, bit_names, codes, limit in SENSOR_FIELDS:
+            if sensor_set & bit:
+                fmt += codes
+                names += bit_names
+                limits += [limit] * len(bit_names)
+        layout = (struct.Struct(fmt), tuple(names), tuple(_SENSOR_FIELD_NAMES.index(n) for n in names),
+                  tuple(limits), attrgetter(*names) if names else (lambda m: ()))
+        _SENSOR_LAYOUTS[sensor_set] = layout
+    return layout
+
+
+# Payload length of every fixed-size type; HELLO is 9 + name_len, SAMPLE_SENSORS 7 + its set's fields.
 HELLO_FIXED_SIZE = _HELLO.size
 PAYLOAD_SIZES: dict[int, int] = {
     MsgType.SAMPLE: _SAMPLE.size, MsgType.GATES: _GATES.size, MsgType.DUTY: _DUTY.size,
@@ -107,6 +152,38 @@ def _enc_duty_legs(m: DutyLegs) -> bytes:
     return _DUTY_LEGS.pack(m.period, d0, d1, d2, m.leg_enable)
 
 
+def _wire_int(value, limit: int):
+    """``value`` as an int (numpy integers too) when it is one in 0..limit, else None."""
+    try:
+        v = index(value)
+    except TypeError:
+        return None
+    return v if 0 <= v <= limit else None
+
+
+def _enc_sample_sensors(m: SampleSensors) -> bytes:
+    sensor_set = _wire_int(m.sensor_set, SENSOR_SET_ALL)
+    if sensor_set is None:
+        raise ProtocolError(f"SAMPLE_SENSORS.sensor_set = {m.sensor_set!r} is not an integer in "
+                            f"0..0x{SENSOR_SET_ALL:03x} (bits 10-15 are reserved)")
+    status = _wire_int(m.status, SAMPLE_SENSORS_STATUS_MAX)
+    if status is None:
+        raise ProtocolError(f"SAMPLE_SENSORS.status = {m.status!r} is not an integer in "
+                            f"0..{SAMPLE_SENSORS_STATUS_MAX} (bits 4-7 are reserved)")
+    st, names, _, limits, get = _sensor_layout(sensor_set)
+    values = get(m)
+    if len(names) == 1:
+        values = (values,)
+    checked = []
+    for name, value, limit in zip(names, values, limits):
+        v = _wire_int(value, limit)
+        if v is None:
+            raise ProtocolError(f"SAMPLE_SENSORS.{name} = {value!r} is not an integer in 0..{limit}"
+                                + (" (bits 3-7 are reserved)" if limit == 0x07 else ""))
+        checked.append(v)
+    return _SAMPLE_SENSORS_FIXED.pack(m.period, sensor_set, status) + st.pack(*checked)
+
+
 def _generic_encoder(st: struct.Struct, *names: str):
     get = attrgetter(*names)
     if len(names) == 1:
@@ -135,6 +212,7 @@ _PAYLOAD_ENCODERS = {
     Heartbeat: _generic_encoder(_HEARTBEAT, "counter"),
     Shutdown: lambda m: b"",
     DutyLegs: _enc_duty_legs,
+    SampleSensors: _enc_sample_sensors,
 }
 
 # Wire width of each field, to name the offending field when packing fails.
@@ -194,6 +272,7 @@ _FIELD_FORMATS: dict[type, dict[str, str]] = {
     Fault: {"period": "I", "code": "H", "value": "f"},
     Heartbeat: {"counter": "I"},
     DutyLegs: {"period": "I", "duty": "H", "leg_enable": "B"},
+    SampleSensors: {"period": "I"},  # the other fields are checked by _enc_sample_sensors
 }
 
 
@@ -240,6 +319,21 @@ def _dec_duty_legs(buf, off: int, n: int):
     return DutyLegs(period, (d0, d1, d2), leg_enable)
 
 
+def _dec_sample_sensors(buf, off: int, n: int):
+    if n < SAMPLE_SENSORS_FIXED_SIZE:
+        return None
+    period, sensor_set, status = _SAMPLE_SENSORS_FIXED.unpack_from(buf, off)
+    if sensor_set & ~SENSOR_SET_ALL:
+        return None  # a reserved bit: the layout is unknown, counted as a length error
+    st, _, indices, _, _ = _sensor_layout(sensor_set)
+    if n != SAMPLE_SENSORS_FIXED_SIZE + st.size:
+        return None
+    values = [0] * len(_SENSOR_FIELD_NAMES)
+    for i, v in zip(indices, st.unpack_from(buf, off + SAMPLE_SENSORS_FIXED_SIZE)):
+        values[i] = v
+    return SampleSensors(period, sensor_set, status, *values)
+
+
 def _generic_decoder(st: struct.Struct, cls):
     size = st.size
     unpack_from = st.unpack_from
@@ -266,6 +360,7 @@ _PAYLOAD_DECODERS = {
     MsgType.HEARTBEAT: _generic_decoder(_HEARTBEAT, Heartbeat),
     MsgType.SHUTDOWN: lambda buf, off, n: Shutdown() if n == 0 else None,
     MsgType.DUTY_LEGS: _dec_duty_legs,
+    MsgType.SAMPLE_SENSORS: _dec_sample_sensors,
 }
 # Plain int keys: a dict lookup with an int hashes the same but skips the enum's __hash__.
 _PAYLOAD_DECODERS = {int(k): v for k, v in _PAYLOAD_DECODERS.items()}
@@ -279,10 +374,24 @@ def decode_payload(msg_type: int, payload: bytes):
     msg = dec(payload, 0, len(payload))
     if msg is None:
         name = MsgType(msg_type).name
-        expected = (f"{HELLO_FIXED_SIZE} + name_len (name_len <= {NAME_MAX})" if msg_type == MsgType.HELLO
-                    else str(PAYLOAD_SIZES[msg_type]))
+        if msg_type == MsgType.HELLO:
+            expected = f"{HELLO_FIXED_SIZE} + name_len (name_len <= {NAME_MAX})"
+        elif msg_type == MsgType.SAMPLE_SENSORS:
+            expected = _sample_sensors_expected(payload)
+        else:
+            expected = str(PAYLOAD_SIZES[msg_type])
         raise ProtocolError(f"{name} payload of {len(payload)} bytes; expected {expected}")
     return msg
+
+
+def _sample_sensors_expected(payload: bytes) -> str:
+    """What a SAMPLE_SENSORS payload of the wrong length should have been, for the error."""
+    if len(payload) < SAMPLE_SENSORS_FIXED_SIZE:
+        return f"at least {SAMPLE_SENSORS_FIXED_SIZE}"
+    sensor_set = payload[4] | payload[5] << 8
+    if sensor_set & ~SENSOR_SET_ALL:
+        return f"a sensor_set without reserved bits 10-15 (got 0x{sensor_set:04x})"
+    return f"{sample_sensors_size(sensor_set)} for sensor_set 0x{sensor_set:04x}"
 
 
 # ---------------------------------------------------------------- frames

@@ -8,7 +8,7 @@ version does not name (a future parameter id, say) pass through unguessed.
 """
 from __future__ import annotations
 
-from dataclasses import fields
+from dataclasses import MISSING, fields
 from enum import IntEnum
 from typing import ClassVar
 
@@ -33,6 +33,7 @@ class MsgType(IntEnum):
     HEARTBEAT = 0x0C
     SHUTDOWN = 0x0D
     DUTY_LEGS = 0x0F  # 0x0E stays undefined: the vector files use it as the unknown type
+    SAMPLE_SENSORS = 0x10  # SAMPLE with a board-declared sensor set, to a board with CAP_SENSOR_SET
 
 
 class Role(IntEnum):
@@ -93,10 +94,16 @@ class ParamId(IntEnum):
     VDC_OFFSET_COUNTS = 5
     ENCODER_COUNTS_PER_REV = 6
     CURRENT_PHASES = 7  # 0: a,b  1: a,c  2: b,c
+    SENSOR_SET = 8  # read-only: the board's SAMPLE_SENSORS sensor set (SENSOR_* bits) as a float32
     POLE_PAIRS = 10
     STATOR_RESISTANCE_OHM = 11
     STATOR_INDUCTANCE_H = 12
     MAGNET_FLUX_WB = 13
+    TERMINAL_V_PER_COUNT = 14  # phase terminal volts per count, divider included
+    RESOLVER_POLE_PAIRS = 15  # resolver electrical turns per mechanical turn
+    RESOLVER_OFFSET_COUNTS = 16  # resolver sin/cos count at zero signal
+    TEMPERATURE_DEGC_PER_COUNT = 17
+    TEMPERATURE_OFFSET_COUNTS = 18  # temperature count at 0 degC
     FLUX_REF_WB = 20
     FLUX_BAND_WB = 21
     TORQUE_BAND_NM = 22
@@ -128,6 +135,28 @@ CAP_DUTY = 0x0002
 CAP_TELEMETRY = 0x0004
 CAP_CAN = 0x0008
 CAP_DUTY_LEGS = 0x0010
+CAP_SENSOR_SET = 0x0020  # reads SAMPLE_SENSORS (instead of SAMPLE); its set is parameter SENSOR_SET
+
+# SAMPLE_SENSORS sensor-set bits; each set bit's fields follow the fixed part in bit order
+# (SPEC.md 6.13, 9.8); bits 10-15 reserved
+SENSOR_CURRENT_A = 0x0001           # adc_ia u16
+SENSOR_CURRENT_B = 0x0002           # adc_ib u16
+SENSOR_CURRENT_C = 0x0004           # adc_ic u16
+SENSOR_VDC = 0x0008                 # adc_vdc u16
+SENSOR_ENCODER = 0x0010             # encoder u16
+SENSOR_HALL = 0x0020                # hall u8: bit 0 A, 1 B, 2 C
+SENSOR_TERMINAL_VOLTAGES = 0x0040   # adc_va, adc_vb, adc_vc u16
+SENSOR_BEMF_COMPARATORS = 0x0080    # bemf_comparators u8: bit x = phase x above the virtual neutral
+SENSOR_RESOLVER = 0x0100            # adc_resolver_sin, adc_resolver_cos u16
+SENSOR_TEMPERATURE = 0x0200         # adc_temperature u16
+SENSOR_SET_ALL = 0x03FF
+# The names board files use (hil/boards: `sensors: [current_a, ...]`), in bit order.
+SENSOR_SET_NAMES = {
+    "current_a": SENSOR_CURRENT_A, "current_b": SENSOR_CURRENT_B, "current_c": SENSOR_CURRENT_C,
+    "vdc": SENSOR_VDC, "encoder": SENSOR_ENCODER, "hall": SENSOR_HALL,
+    "terminal_voltages": SENSOR_TERMINAL_VOLTAGES, "bemf_comparators": SENSOR_BEMF_COMPARATORS,
+    "resolver": SENSOR_RESOLVER, "temperature": SENSOR_TEMPERATURE,
+}
 
 # DUTY_LEGS leg_enable bits: 1 = the leg switches (DUTY's complementary PWM), 0 = floated
 # (both switches off, the phase current free-wheels through the diodes); bits 3-7 reserved
@@ -170,8 +199,11 @@ def _fast_init(cls):
         raise TypeError(f"{cls.__name__}: _fast_init is for dataclasses with fields, declared "
                         f"with init=False and without __post_init__")
     namespace = {f"_set_{n}": cls.__dict__[n].__set__ for n in names}
+    # a field with a default keeps it (SampleSensors: the fields of absent sensors are 0)
+    params = [n if f.default is MISSING else f"{n}=_default_{n}" for n, f in zip(names, fields(cls))]
+    namespace.update({f"_default_{f.name}": f.default for f in fields(cls) if f.default is not MISSING})
     body = "".join(f"    _set_{n}(self, {n})\n" for n in names)
-    src = f"def __init__(self, {', '.join(names)}):\n{body}"
+    src = f"def __init__(self, {', '.join(params)}):\n{body}"
     exec(src, namespace)  # noqa: S102 - source built from the dataclass's own field names
     init = namespace["__init__"]
     init.__qualname__ = f"{cls.__qualname__}.__init__"
@@ -364,6 +396,32 @@ class Heartbeat(_Message):
     counter: int
 
 
+@_fast_init
+@dataclass(frozen=True, slots=True, init=False)
+class SampleSensors(_Message):
+    """Plant -> a controller with CAP_SENSOR_SET once per period, instead of SAMPLE: the
+    sensors of its ``sensor_set`` sampled at t = period * T. Only the fields of set bits travel;
+    the others are 0 in a decoded message (and not sent, whatever they hold, when encoding)."""
+
+    TYPE: ClassVar[MsgType] = MsgType.SAMPLE_SENSORS
+    period: int
+    sensor_set: int          # SENSOR_* bits; bits 10-15 reserved
+    status: int              # STATUS_* (bits 0-3; 4-7 reserved)
+    adc_ia: int = 0          # phase-a current, ADC counts (u16)
+    adc_ib: int = 0
+    adc_ic: int = 0
+    adc_vdc: int = 0         # DC-link voltage, ADC counts
+    encoder: int = 0         # quadrature counter, wraps at 65536
+    hall: int = 0            # bit 0 Hall A, bit 1 B, bit 2 C
+    adc_va: int = 0          # phase-a terminal voltage to DC-, ADC counts
+    adc_vb: int = 0
+    adc_vc: int = 0
+    bemf_comparators: int = 0  # bit x: phase x terminal above the virtual neutral
+    adc_resolver_sin: int = 0
+    adc_resolver_cos: int = 0
+    adc_temperature: int = 0   # winding temperature, ADC counts
+
+
 @dataclass(frozen=True, slots=True)
 class Shutdown(_Message):
     """Bench -> controller: stop switching and exit. No fields."""
@@ -374,8 +432,8 @@ class Shutdown(_Message):
 MESSAGE_CLASSES: dict[MsgType, type] = {
     cls.TYPE: cls
     for cls in (Hello, Sample, Gates, Duty, Command, Telemetry, ParamSet, ParamGet, ParamValue,
-                Status, Fault, Heartbeat, Shutdown, DutyLegs)
+                Status, Fault, Heartbeat, Shutdown, DutyLegs, SampleSensors)
 }
 
 Message = (Hello | Sample | Gates | Duty | Command | Telemetry | ParamSet | ParamGet | ParamValue
-           | Status | Fault | Heartbeat | Shutdown | DutyLegs)
+           | Status | Fault | Heartbeat | Shutdown | DutyLegs | SampleSensors)

@@ -19,14 +19,15 @@ from binascii import crc_hqx
 from cobs.cobs import encode as cobs_encode
 
 from protocol.can_mapping import CanReassembler, can_pack
-from protocol.codec import COUNTER_NAMES, StreamDecoder, encode_frame
+from protocol.codec import COUNTER_NAMES, StreamDecoder, encode_frame, encode_payload
 from protocol.can_mapping import COUNTER_NAMES as CAN_COUNTER_NAMES
 from protocol.messages import (
     CAP_CAN, CAP_GATES, CAP_TELEMETRY, GATE_A_HIGH, GATE_B_LOW, GATE_C_LOW, LEG_A, LEG_B, LEGS_ALL,
-    STATUS_INDEX_PULSE,
+    SENSOR_BEMF_COMPARATORS, SENSOR_CURRENT_A, SENSOR_CURRENT_B, SENSOR_CURRENT_C, SENSOR_ENCODER, SENSOR_HALL,
+    SENSOR_RESOLVER, SENSOR_SET_ALL, SENSOR_TEMPERATURE, SENSOR_TERMINAL_VOLTAGES, SENSOR_VDC, STATUS_INDEX_PULSE,
     STATUS_OVERVOLTAGE, Command, ControllerState, Duty, DutyLegs, Fault, FaultCode, Gates, Heartbeat, Hello,
-    ParamGet, ParamId, ParamSet, ParamStatus, ParamValue, Role, Sample, Shutdown, SpeedSource, Status,
-    Telemetry,
+    ParamGet, ParamId, ParamSet, ParamStatus, ParamValue, Role, Sample, SampleSensors, Shutdown, SpeedSource,
+    Status, Telemetry,
 )
 from protocol.vector_file import (
     HANDBUILT_PATH, VECTORS_PATH, CanStream, MessageVector, RejectVector, SerialStream, VectorSet, dump,
@@ -90,6 +91,34 @@ def messages() -> list[tuple[str, object, int, int, int]]:
         ("shutdown", Shutdown(), 22, BENCH, BASE),
         ("duty_legs_six_step", DutyLegs(70_000, (40_000, 0, 0), LEG_A | LEG_B), 23, CONTROLLER, BASE),
         ("duty_legs_all", DutyLegs(0xFFFFFFFF, (1, 2, 3), LEGS_ALL), 24, CONTROLLER, 0x7C0),
+        *sample_sensors_messages(),
+    ]
+
+
+CURRENTS_VDC = SENSOR_CURRENT_A | SENSOR_CURRENT_B | SENSOR_CURRENT_C | SENSOR_VDC
+
+
+def sample_sensors_messages() -> list[tuple[str, object, int, int, int]]:
+    """SAMPLE_SENSORS with the sets of the example drives, the empty and the full set, and fields
+    whose bytes hold zeros (COBS)."""
+    return [
+        ("sample_sensors_encoder", SampleSensors(123_456, SENSOR_CURRENT_A | SENSOR_CURRENT_B | SENSOR_VDC
+                                                 | SENSOR_ENCODER, STATUS_INDEX_PULSE, adc_ia=2048, adc_ib=1000,
+                                                 adc_vdc=3000, encoder=65_000), 30, BENCH, BASE),
+        ("sample_sensors_hall", SampleSensors(70_000, CURRENTS_VDC | SENSOR_HALL, 0, adc_ia=2100, adc_ib=1990,
+                                              adc_ic=1958, adc_vdc=983, hall=0b011), 31, BENCH, BASE),
+        ("sample_sensors_sensorless", SampleSensors(5, CURRENTS_VDC | SENSOR_TERMINAL_VOLTAGES
+                                                    | SENSOR_BEMF_COMPARATORS, 0, adc_ia=2048, adc_ib=2048,
+                                                    adc_ic=2048, adc_vdc=983, adc_va=983, adc_vb=0, adc_vc=500,
+                                                    bemf_comparators=0b001), 32, BENCH, BASE),
+        ("sample_sensors_resolver", SampleSensors(1 << 24, SENSOR_RESOLVER | SENSOR_TEMPERATURE, 8,
+                                                  adc_resolver_sin=3848, adc_resolver_cos=248,
+                                                  adc_temperature=250), 33, BENCH, BASE),
+        ("sample_sensors_empty", SampleSensors(0, 0, 0), 0, BENCH, BASE),
+        ("sample_sensors_all_max", SampleSensors(0xFFFFFFFF, SENSOR_SET_ALL, 15, *([0xFFFF] * 5), 7,
+                                                 *([0xFFFF] * 3), 7, *([0xFFFF] * 3)), 255, BENCH, 0x7C0),
+        ("sample_sensors_zero_bytes", SampleSensors(0x100, SENSOR_SET_ALL, 0, 0x100, 0x001, 0, 0x8000, 0x0080,
+                                                    0, 1, 0x100, 0, 0, 0x0100, 0x0001, 0x0200), 34, BENCH, BASE),
     ]
 
 
@@ -99,6 +128,11 @@ def rejects() -> list[RejectVector]:
         RejectVector("sample_vdc_13bit", Sample(1, 0, 0, 0x1000, 0, 0)),
         RejectVector("sample_status_5bit", Sample(1, 0, 0, 0, 0, 16)),
         RejectVector("hello_name_41", Hello(1, 0, 0, 0, 41, b"x" * 41)),
+        RejectVector("sample_sensors_reserved_set_bit", SampleSensors(1, 0x0400, 0)),
+        RejectVector("sample_sensors_status_5bit", SampleSensors(1, SENSOR_CURRENT_A, 16)),
+        RejectVector("sample_sensors_hall_reserved_bit", SampleSensors(1, SENSOR_HALL, 0, hall=8)),
+        RejectVector("sample_sensors_comparator_reserved_bit",
+                     SampleSensors(1, SENSOR_BEMF_COMPARATORS, 0, bemf_comparators=0x80)),
     ]
 
 
@@ -176,8 +210,29 @@ def serial_streams(m: dict[str, object]) -> list[tuple[SerialStream, bool]]:
                       {"frames_ok": 1, "crc_errors": 1}), True),
         (SerialStream("overflow_then_frame", bytes(range(1, 201)) + b"\x00" + F(g, 0), ["gates_mid"],
                       {"frames_ok": 1, "framing_errors": 1}), True),
+        *_sample_sensors_streams(m),
     ]
     return cases
+
+
+def _sample_sensors_streams(m: dict[str, object]) -> list[tuple[SerialStream, bool]]:
+    """SAMPLE_SENSORS payloads whose length disagrees with their sensor set: length errors."""
+    F = encode_frame
+    enc = m["sample_sensors_encoder"]
+    good = encode_payload(enc)                       # 15 bytes: 7 + 4 fields of 2
+    fixed = struct.pack("<IHB", 9, 0x0400, 0)         # reserved bit 10: layout unknown
+    return [
+        (SerialStream("sample_sensors_wrong_lengths",
+                      raw_frame(1, 0x10, 0, good[:-1]) + raw_frame(1, 0x10, 1, good + b"\x00")
+                      + raw_frame(1, 0x10, 2, good[:6]) + raw_frame(1, 0x10, 3, fixed)
+                      + raw_frame(1, 0x10, 4, fixed + bytes(2)) + raw_frame(1, 0x10, 5, struct.pack("<IHB", 9, 0xFFFF, 0)
+                                                                             + bytes(31))
+                      + F(enc, 6), ["sample_sensors_encoder"], {"frames_ok": 1, "length_errors": 6}), True),
+        (SerialStream("sample_sensors_between_samples",
+                      F(m["sample_mid"], 0) + F(enc, 1) + F(m["sample_sensors_all_max"], 2) + F(m["gates_mid"], 3),
+                      ["sample_mid", "sample_sensors_encoder", "sample_sensors_all_max", "gates_mid"],
+                      {"frames_ok": 4}), True),
+    ]
 
 
 def _frames(msg, role: int, seq: int = 0, base: int = BASE) -> list[tuple[int, bytes]]:
@@ -269,7 +324,41 @@ def can_streams(m: dict[str, object]) -> tuple[list[CanStream], dict[str, tuple[
     streams.append(CanStream("other_base_id", 0x7C0, _frames(m["gates_max"], CONTROLLER, base=0x7C0)
                              + _frames(m["gates_mid"], CONTROLLER),
                              [("gates_max", CONTROLLER)], {"messages_ok": 1, "ignored_frames": 1}))
+    streams += _sample_sensors_can_streams(m, extra)
     return streams, extra
+
+
+def _sample_sensors_can_streams(m: dict[str, object], extra: dict) -> list[CanStream]:
+    """SAMPLE_SENSORS on CAN: segmented (SPEC 7.4), its length known from sensor_set in frame 0."""
+    streams = []
+    full = _frames(m["sample_sensors_zero_bytes"], BENCH, seq=7)
+    assert len(full) == 5                            # 31 bytes: 4 frames of 7 and one of 3
+    streams.append(CanStream("sample_sensors_in_order", BASE, full, [("sample_sensors_zero_bytes", BENCH)],
+                             {"messages_ok": 1}))
+    # frame 2 lost: one sequence error, frames 3 and 4 dropped uncounted; the next copy arrives whole
+    streams.append(CanStream("sample_sensors_missing_frame", BASE,
+                             full[:2] + full[3:] + _frames(m["sample_sensors_zero_bytes"], BENCH, seq=8),
+                             [("sample_sensors_zero_bytes", BENCH)], {"messages_ok": 1, "sequence_errors": 1}))
+    # a reserved sensor-set bit in frame 0: the length is unknown, one length error; the rest of
+    # that message is dropped uncounted
+    bad = [(full[0][0], full[0][1][:5] + bytes((full[0][1][5], full[0][1][6] | 0x04)) + full[0][1][7:])] + full[1:]
+    streams.append(CanStream("sample_sensors_reserved_set_bit", BASE, bad, [], {"length_errors": 1}))
+    # the encoder set's 15 bytes in three frames; a last frame of 2 bytes makes 16: too long
+    enc = _frames(m["sample_sensors_encoder"], BENCH, seq=1)
+    assert [len(d) for _, d in enc] == [8, 8, 2]
+    too_long = enc[:2] + [(enc[2][0], enc[2][1] + b"\x00")]
+    streams.append(CanStream("sample_sensors_too_long", BASE, too_long + enc, [("sample_sensors_encoder", BENCH)],
+                             {"messages_ok": 1, "length_errors": 1}))
+    # the empty set: 7 bytes, one frame
+    streams.append(CanStream("sample_sensors_empty_set", BASE, _frames(m["sample_sensors_empty"], BENCH),
+                             [("sample_sensors_empty", BENCH)], {"messages_ok": 1}))
+    # its full 32-bit period sets the reference (SPEC 7.3): a following DUTY_LEGS extends from it
+    extra["duty_legs_p123457"] = (DutyLegs(123_457, (1, 2, 3), LEGS_ALL), CONTROLLER, 0)
+    streams.append(CanStream("sample_sensors_sets_reference", BASE,
+                             enc + _frames(extra["duty_legs_p123457"][0], CONTROLLER),
+                             [("sample_sensors_encoder", BENCH), ("duty_legs_p123457", CONTROLLER)],
+                             {"messages_ok": 2}))
+    return streams
 
 
 # ---------------------------------------------------------------- building and checking

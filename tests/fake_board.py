@@ -13,8 +13,12 @@ import tty
 
 from protocol.codec import FrameEncoder, StreamDecoder
 from protocol.messages import (
-    PROTOCOL_VERSION, Gates, Hello, ParamGet, ParamSet, ParamValue, Role, Sample, Shutdown,
+    PROTOCOL_VERSION, Gates, Hello, ParamGet, ParamSet, ParamValue, Role, Sample, SampleSensors,
+    Shutdown,
 )
+
+#: SENSOR_SET's parameter id (SPEC 8, read-only).
+SENSOR_SET_ID = 8
 
 
 class FakeBoard:
@@ -29,13 +33,18 @@ class FakeBoard:
                  die_after_samples: int | None = None, role: int = int(Role.CONTROLLER),
                  capabilities: int = 1, control_period_ns: int | None = None,
                  clamp: dict[int, float] | None = None, hello_raw: bytes | None = None,
-                 on_sample=None, hello_after_tries: int = 1, known: set[int] | None = None):
+                 on_sample=None, hello_after_tries: int = 1, known: set[int] | None = None,
+                 sensor_set: float | None = None):
         """role, capabilities, control_period_ns (None: echo the bench's): its HELLO.
         clamp: parameter id -> the value it answers PARAM_SET with (status OK).
         hello_raw: bytes sent instead of a HELLO answer (garbage, frames of another version).
         on_sample(sample, encoder) -> bytes: what it writes for a SAMPLE (default GATES 0).
         hello_after_tries: answers only the n-th HELLO (1: the first).
-        known: the parameter ids it knows (None: all); others are answered status 1 UNKNOWN."""
+        known: the parameter ids it knows (None: all); others are answered status 1 UNKNOWN.
+        sensor_set: what it answers PARAM_GET of SENSOR_SET with (None: 0.0 like any other
+        parameter it was not given; advertise CAP_SENSOR_SET in `capabilities` to be asked);
+        a PARAM_SET of it is answered READ_ONLY. Every SAMPLE and SAMPLE_SENSORS it gets is in
+        `received` and answered alike."""
         self.proto_version = proto_version
         self.answer_hello = answer_hello
         self.die_after_samples = die_after_samples
@@ -46,6 +55,7 @@ class FakeBoard:
         self.on_sample = on_sample
         self.hello_after_tries = hello_after_tries
         self.known = known
+        self.sensor_set = sensor_set
         self.hellos = 0
         self.master, slave = os.openpty()
         tty.setraw(slave, termios.TCSANOW)
@@ -106,12 +116,17 @@ class FakeBoard:
                 elif isinstance(msg, (ParamSet, ParamGet)) and self.known is not None \
                         and msg.id not in self.known:
                     self._write(enc, ParamValue(id=msg.id, status=1, value=0.0))
+                elif isinstance(msg, (ParamSet, ParamGet)) and msg.id == SENSOR_SET_ID \
+                        and self.sensor_set is not None:
+                    status = 3 if isinstance(msg, ParamSet) else 0      # READ_ONLY
+                    self._write(enc, ParamValue(id=msg.id, status=status,
+                                                value=float(self.sensor_set)))
                 elif isinstance(msg, ParamSet):
                     self.params[msg.id] = self.clamp.get(msg.id, msg.value)
                     self._write(enc, ParamValue(id=msg.id, status=0, value=self.params[msg.id]))
                 elif isinstance(msg, ParamGet):
                     self._write(enc, ParamValue(id=msg.id, status=0, value=self.params.get(msg.id, 0.0)))
-                elif isinstance(msg, Sample):
+                elif isinstance(msg, (Sample, SampleSensors)):
                     if self.die_after_samples is not None and self.samples >= self.die_after_samples:
                         os.close(self.master)
                         self.master = -1

@@ -40,9 +40,9 @@ def test_enums_match_the_c_header(c_name, prefix, py_enum):
 
 def test_bit_constants_and_limits_match_the_c_header():
     defines = {m.group(1): int(m.group(2), 0)
-               for m in re.finditer(r"#define HIL_((?:CAP|GATE|STATUS|CMD|LEGS?)_\w+)\s+(0x[0-9A-Fa-f]+|\d+)u",
+               for m in re.finditer(r"#define HIL_((?:CAP|GATE|STATUS|CMD|LEGS?|SENSOR)_\w+)\s+(0x[0-9A-Fa-f]+|\d+)u",
                                     HEADER)}
-    assert len(defines) == 21
+    assert len(defines) == 33
     for name, value in defines.items():
         assert getattr(messages, name) == value, name
     assert re.search(r"#define HIL_PROTO_VERSION (\d+)u", HEADER).group(1) == str(PROTOCOL_VERSION)

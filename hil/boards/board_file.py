@@ -9,6 +9,7 @@ names are checked against the board file before anything runs.
 
     name: my ESC rev B
     capabilities: [DUTY, TELEMETRY]
+    sensors: [current_a, current_b, vdc, hall]         # SAMPLE_SENSORS' set (SPEC 6.13)
     parameters:
       standard: [torque_limit_nm, overcurrent_a]        # SPEC 8, ids 1-59
       vendor:                                           # ids 60-65535, the board's own
@@ -18,6 +19,11 @@ names are checked against the board file before anything runs.
       velocity_lpf_hz: {value: 250, optional: true}     # UNKNOWN answer: logged, run goes on
     profile_settings:                                   # more, on one bench profile only
       paper-hardware: {torque_limit_nm: 0.6}
+
+`sensors` names the board's sensor set (protocol.messages.SENSOR_SET_NAMES): a board with the
+SENSOR_SET capability gets SAMPLE_SENSORS with exactly these sensors every period, and the
+session refuses a board whose SENSOR_SET parameter says otherwise. Absent or empty: the board
+gets today's SAMPLE.
 
 Without a board file the bench assumes a board written from SPEC.md alone: it pushes only the
 required parameters and lets plans set any standard one (``spec_board``).
@@ -33,6 +39,8 @@ from typing import Any
 from configfile.dataclass_methods import dataclass
 from configfile.schema import NAME, NUMBER, SchemaChecker, obj
 from configfile.source import ConfigError, YamlDocument, load_yaml
+
+from protocol.messages import SENSOR_SET_NAMES
 
 from hil.boards.standard import (
     CAPABILITY_NAMES, REQUIRED_PARAMS, STANDARD_PARAMS, VENDOR_ID_MAX, VENDOR_ID_MIN, ParamSpec)
@@ -57,6 +65,7 @@ BOARD_SCHEMA = obj({
         "standard": {"type": "array", "items": {"type": "string"}, "uniqueItems": True},
         "vendor": {"type": ["object", "null"], "additionalProperties": _VENDOR_SCHEMA},
     }),
+    "sensors": {"type": ["array", "null"], "items": {"type": "string"}},
     "settings": _SETTINGS_SCHEMA,
     "profile_settings": {"type": ["object", "null"], "additionalProperties": _SETTINGS_SCHEMA},
 }, required=("name",))
@@ -83,6 +92,13 @@ class BoardFile:
     profile_settings: dict[str, tuple[Setting, ...]] | None = None
     capabilities: tuple[str, ...] = ()
     description: str = ""
+    # the sensor set's names (SENSOR_SET_NAMES), in the file's order; () = today's SAMPLE
+    sensors: tuple[str, ...] = ()
+
+    @property
+    def sensor_set(self) -> int:
+        """The `sensors:` key as SENSOR_SET's bit mask (0: none given, today's SAMPLE)."""
+        return sensor_set_mask(self.sensors)
 
     def param(self, name: str) -> ParamSpec:
         """The parameter called `name`; KeyError with a sentence that names the board file."""
@@ -137,14 +153,32 @@ class BoardFile:
                        for label, block in (self.profile_settings or {}).items()}
         return BoardFile(name=self.name, source=self.source, parameters=self.parameters,
                          settings=tuple(merged.values()), profile_settings=per_profile,
-                         capabilities=self.capabilities, description=self.description)
+                         capabilities=self.capabilities, description=self.description,
+                         sensors=self.sensors)
 
     def summary(self) -> dict[str, Any]:
         """Plain data for logs and result.json."""
         return {"name": self.name, "source": self.source,
                 "capabilities": list(self.capabilities),
+                **({"sensors": list(self.sensors)} if self.sensors else {}),
                 "vendor_parameters": {n: {"id": p.id, "unit": p.unit}
                                       for n, p in self.parameters.items() if p.vendor}}
+
+
+def sensor_set_mask(names) -> int:
+    """SENSOR_SET's bit mask of sensor names (each one of SENSOR_SET_NAMES)."""
+    mask = 0
+    for name in names:
+        mask |= SENSOR_SET_NAMES[name]
+    return mask
+
+
+def sensor_set_names(mask: int) -> list[str]:
+    """The names of a SENSOR_SET bit mask's known bits, in bit order (unknown bits as hex)."""
+    names = [name for name, bit in sorted(SENSOR_SET_NAMES.items(), key=lambda kv: kv[1])
+             if mask & bit]
+    rest = mask & ~sensor_set_mask(SENSOR_SET_NAMES)
+    return names + ([f"0x{rest:04x}"] if rest else [])
 
 
 def _profile_key(label: str | None) -> str:
@@ -170,15 +204,42 @@ def load_board(path: str | Path) -> BoardFile:
         raise doc.error((), "a board file is a mapping with at least `name`")
     SchemaChecker(doc).check(BOARD_SCHEMA, data)
     params = _parameters(doc, data.get("parameters") or {})
+    sensors = _sensors(doc, data.get("sensors") or ())
+    for sensor in sensors:          # a sensor's scaling: the bench pushes it (SPEC 8)
+        for name in SENSOR_PARAMS.get(sensor, ()):
+            params.setdefault(name, STANDARD_PARAMS[name])
     board = BoardFile(name=data["name"], source=doc.source, parameters=params,
                       capabilities=tuple(data.get("capabilities") or ()),
-                      description=data.get("description", ""))
+                      description=data.get("description", ""),
+                      sensors=sensors)
     settings = _settings(doc, board, data.get("settings"), ("settings",))
     per_profile = {str(label): _settings(doc, board, block, ("profile_settings", label))
                    for label, block in (data.get("profile_settings") or {}).items()}
     return BoardFile(name=board.name, source=board.source, parameters=params,
                      settings=settings, profile_settings=per_profile,
-                     capabilities=board.capabilities, description=board.description)
+                     capabilities=board.capabilities, description=board.description,
+                     sensors=board.sensors)
+
+
+#: The standard parameters of a sensor's scaling, which a board with it in `sensors:` takes.
+SENSOR_PARAMS = {"terminal_voltages": ("terminal_v_per_count",),
+                 "resolver": ("resolver_pole_pairs", "resolver_offset_counts"),
+                 "temperature": ("temperature_degc_per_count", "temperature_offset_counts")}
+
+
+def _sensors(doc: YamlDocument, names) -> tuple[str, ...]:
+    """The `sensors:` list: each a known sensor name, none twice (file, line and key)."""
+    seen: list[str] = []
+    for i, name in enumerate(names):
+        if name not in SENSOR_SET_NAMES:
+            close = difflib.get_close_matches(str(name), list(SENSOR_SET_NAMES), n=1, cutoff=0.6)
+            hint = (f"; did you mean '{close[0]}'?" if close else
+                    f" (known: {', '.join(SENSOR_SET_NAMES)})")
+            raise doc.error(("sensors", i), f"'{name}' is not a sensor{hint}")
+        if name in seen:
+            raise doc.error(("sensors", i), f"sensor '{name}' is listed twice")
+        seen.append(name)
+    return tuple(seen)
 
 
 def _parameters(doc: YamlDocument, section: dict) -> dict[str, ParamSpec]:
@@ -235,4 +296,4 @@ def load_board_or_spec(path: str | Path | None) -> BoardFile:
 
 
 __all__ = ["BoardFile", "Setting", "load_board", "spec_board", "load_board_or_spec",
-           "ConfigError"]
+           "ConfigError", "sensor_set_mask", "sensor_set_names"]

@@ -13,7 +13,7 @@ from __future__ import annotations
 from configfile.dataclass_methods import dataclass
 
 #: HELLO capability bits (SPEC 9.1), bit i = 1 << i.
-CAPABILITY_NAMES = ("GATES", "DUTY", "TELEMETRY", "CAN", "DUTY_LEGS")
+CAPABILITY_NAMES = ("GATES", "DUTY", "TELEMETRY", "CAN", "DUTY_LEGS", "SENSOR_SET")
 
 #: Lowest vendor id: SPEC 8 reserves 60-65535 for a board's own parameters.
 VENDOR_ID_MIN = 60
@@ -52,10 +52,16 @@ SPEC_DEFAULTS: dict[str, float] = {
     "vdc_offset_counts": 0,
     "encoder_counts_per_rev": 4096,
     "current_phases": 0,
+    "sensor_set": 0,
     "pole_pairs": 1,
     "stator_resistance_ohm": 0.466,
     "stator_inductance_h": 0.0048,
     "magnet_flux_wb": 0.0928,
+    "terminal_v_per_count": 0.0244140625,
+    "resolver_pole_pairs": 1,
+    "resolver_offset_counts": 2048,
+    "temperature_degc_per_count": 0.1,
+    "temperature_offset_counts": 0,
     "flux_ref_wb": 0.099,
     "flux_band_wb": 0.00233,
     "torque_band_nm": 0.0586,
@@ -89,10 +95,18 @@ STANDARD_PARAMS: dict[str, ParamSpec] = {p.name: p for p in (
          minimum=1),
     _std("current_phases", 7, "1", "phases in adc_i1, adc_i2: 0 = a,b; 1 = a,c; 2 = b,c",
          minimum=0, maximum=2),
+    _std("sensor_set", 8, "1", "the board's sensor set, SAMPLE_SENSORS' bit mask (read-only)",
+         read_only=True),
     _std("pole_pairs", 10, "1", "pole pairs p", minimum=1),
     _std("stator_resistance_ohm", 11, "ohm", "stator resistance R_s", minimum=0),
     _std("stator_inductance_h", 12, "H", "synchronous inductance L_s", minimum=0),
     _std("magnet_flux_wb", 13, "Wb", "magnet flux linkage psi_r", minimum=0),
+    _std("terminal_v_per_count", 14, "V/count", "phase terminal volts per count (divider "
+         "included)", minimum=0),
+    _std("resolver_pole_pairs", 15, "1", "resolver pole pairs (theta_r = n theta_m)", minimum=1),
+    _std("resolver_offset_counts", 16, "count", "resolver sin/cos count at zero"),
+    _std("temperature_degc_per_count", 17, "degC/count", "winding temperature scaling"),
+    _std("temperature_offset_counts", 18, "count", "temperature count at 0 degC"),
     _std("flux_ref_wb", 20, "Wb", "default stator flux reference", minimum=0),
     _std("flux_band_wb", 21, "Wb", "flux hysteresis band (full width)", minimum=0),
     _std("torque_band_nm", 22, "N m", "torque hysteresis band (full width)", minimum=0),

@@ -21,7 +21,9 @@ PLANT_PARAMS: dict[str, str] = {
 
 _SENSORS = {"enum": ["adc_i1", "adc_i2", "adc_vdc"]}
 _COUNTS = {"type": "integer", "minimum": 0, "maximum": 4095}
-_DIRECTION = {"enum": ["out", "in", "both"]}   # link faults: bench -> board, board -> bench
+_DIRECTION = {"enum": ["out", "in", "both"]}
+_PHASE = {"enum": ["a", "b", "c"]}
+_LEVEL = {"enum": [0, 1]}                      # a digital sensor's output: low or high   # link faults: bench -> board, board -> bench
 
 _FAULT_COMMON = {"duration_s": POSITIVE, "clear": BOOLEAN}
 FAULTS: dict[str, dict] = {
@@ -58,6 +60,9 @@ FAULTS: dict[str, dict] = {
     "link_reorder": obj({"rate": FRACTION, "seed": {"type": "integer"}, "direction": _DIRECTION},
                          ["rate"]),
     "link_unplug": obj({"direction": _DIRECTION}),
+    # a sensor-set board's digital sensors (SPEC 6.13): a Hall sensor, a phase's BEMF comparator
+    "hall_stuck": obj({"sensor": _PHASE, "level": _LEVEL}, ["sensor", "level"]),
+    "bemf_comparator_stuck": obj({"phase": _PHASE, "level": _LEVEL}, ["phase", "level"]),
 }
 for _schema in FAULTS.values():
     _schema["properties"].update(_FAULT_COMMON)

@@ -54,6 +54,8 @@ MODBUS_BITS: dict[int, tuple[str, Mapping[str, Any]]] = {
     18: ("link_duplicate", {"rate": 0.01}),
     19: ("link_reorder", {"rate": 0.01}),
     20: ("link_unplug", {}),
+    21: ("hall_stuck", {"sensor": "a", "level": 1}),
+    22: ("bemf_comparator_stuck", {"phase": "a", "level": 1}),
 }
 BIT_OF = {name: bit for bit, (name, _) in MODBUS_BITS.items()}
 MODBUS_BIT_MASK = sum(1 << bit for bit in MODBUS_BITS)
@@ -62,7 +64,8 @@ MODBUS_BIT_MASK = sum(1 << bit for bit in MODBUS_BITS)
 #: coexist (an offset on adc_i1 and one on adc_vdc); on the same target the newer replaces.
 TARGET_KEYS = {"gate_stuck": "switch", "sensor_offset": "sensor", "sensor_gain": "sensor",
                "sensor_stuck": "sensor", "sensor_saturation": "sensor", "sensor_noise": "sensor",
-               "parameter_drift": "parameter"}
+               "parameter_drift": "parameter", "hall_stuck": "sensor",
+               "bemf_comparator_stuck": "phase"}
 #: Faults of one kind that cannot coexist although their targets differ.
 _EXCLUSIVE = {"dc_link_sag": "dc_level", "dc_link_surge": "dc_level"}
 
@@ -94,6 +97,8 @@ DESCRIPTIONS = {
     "link_duplicate": "frames sent twice with probability `rate`",
     "link_reorder": "a frame swapped with the next one with probability `rate`",
     "link_unplug": "every frame lost (the cable is out); use with `duration_s`",
+    "hall_stuck": "Hall sensor `sensor` (a/b/c) reads `level` (0/1) whatever the rotor's angle",
+    "bemf_comparator_stuck": "phase `phase`'s BEMF comparator reads `level` (0/1) whatever its inputs",
 }
 
 #: fault -> its arguments' jsonschema validator, made when a fault's arguments are first found
@@ -438,6 +443,29 @@ def _parameter_drift(inj: FaultInjector, args) -> Callable[[], None]:
     return undo
 
 
+_PHASE_INDEX = {"a": 0, "b": 1, "c": 2}
+
+
+def _stuck_level(levels, index: int, level: int) -> Callable[[], None]:
+    """levels[index] (None: working) held at `level`; the undo restores what it was."""
+    before = levels[index]
+    levels[index] = int(level)
+
+    def undo() -> None:
+        levels[index] = before
+    return undo
+
+
+def _hall_stuck(inj: FaultInjector, args) -> Callable[[], None]:
+    hall = inj.session.plant.sensors.hall
+    return _stuck_level(hall.stuck, _PHASE_INDEX[args["sensor"]], args["level"])
+
+
+def _comparator_stuck(inj: FaultInjector, args) -> Callable[[], None]:
+    terminal = inj.session.plant.sensors.terminal
+    return _stuck_level(terminal.comparator_stuck, _PHASE_INDEX[args["phase"]], args["level"])
+
+
 def _link(inj: FaultInjector, args, name: str) -> Callable[[], None]:
     session = inj.session
     tap = session.tap
@@ -467,6 +495,8 @@ _APPLY: dict[str, Callable[[FaultInjector, Mapping[str, Any]], Callable[[], None
     "dc_link_surge": _dc_level,
     "dc_link_ripple": _dc_ripple,
     "parameter_drift": _parameter_drift,
+    "hall_stuck": _hall_stuck,
+    "bemf_comparator_stuck": _comparator_stuck,
     **{name: (lambda inj, args, name=name: _link(inj, args, name)) for name in LINK_KINDS},
 }
 

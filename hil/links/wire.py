@@ -33,6 +33,12 @@ PAYLOAD_BYTES = {"SAMPLE": 11, "GATES": 5, "DUTY": 10, "DUTY_LEGS": 11, "TELEMET
 #: Data bytes of each message in one classic CAN frame, or its frames (SPEC.md 7.2, 7.4).
 CAN_DLC = {"SAMPLE": (8,), "GATES": (5,), "DUTY": (8,), "DUTY_LEGS": (8,),
            "TELEMETRY": (8,) * 8}
+#: SAMPLE_SENSORS (SPEC 6.13): a fixed head (period u32, sensor_set u16, status u8), then the
+#: bytes of each sensor in the set; bit -> its bytes.
+SAMPLE_SENSORS_HEAD_BYTES = 7
+SENSOR_BYTES = {0x0001: 2, 0x0002: 2, 0x0004: 2, 0x0008: 2, 0x0010: 2, 0x0020: 1, 0x0040: 6,
+                0x0080: 1, 0x0100: 4, 0x0200: 2}
+CAN_SEGMENT_BYTES = 7               # SPEC 7.4: a segmented message's chunk per frame
 SERIAL_OVERHEAD_BYTES = 8           # 4 header + 2 CRC + 1 COBS code byte + 1 delimiter
 UART_BITS_PER_BYTE = 10             # 8N1: start bit, 8 data bits, stop bit
 USB_FULL_SPEED_FRAME_S = 1e-3       # USB 2.0: a frame every 1 ms at full speed
@@ -42,9 +48,29 @@ FTDI_PACKET_DATA_BYTES = 62            # a full-speed packet's 64 bytes less 2 s
 DEFAULT_BAUD = 2_000_000            # what the bench opens a pseudo-terminal's line at
 
 
-def serial_frame_bytes(message: str) -> int:
-    """Bytes on a serial line for one message (SPEC.md 3.2: payload + 8)."""
+def serial_frame_bytes(message: str, sensor_set: int = 0) -> int:
+    """Bytes on a serial line for one message (SPEC.md 3.2: payload + 8); SAMPLE_SENSORS' by
+    its `sensor_set`."""
+    if message == "SAMPLE_SENSORS":
+        return sample_sensors_payload_bytes(sensor_set) + SERIAL_OVERHEAD_BYTES
     return PAYLOAD_BYTES[message] + SERIAL_OVERHEAD_BYTES
+
+
+def sample_sensors_payload_bytes(sensor_set: int) -> int:
+    """SAMPLE_SENSORS' payload for a sensor set (SPEC 6.13: 7 + the set's sensors' bytes);
+    ValueError for a reserved bit, whose layout nobody knows."""
+    unknown = sensor_set & ~sum(SENSOR_BYTES)
+    if unknown or sensor_set < 0:
+        raise ValueError(f"sensor set 0x{sensor_set:04x} has reserved bits 0x{unknown:04x}")
+    return SAMPLE_SENSORS_HEAD_BYTES + sum(n for bit, n in SENSOR_BYTES.items() if sensor_set & bit)
+
+
+def sample_sensors_can_dlc(sensor_set: int) -> tuple[int, ...]:
+    """The CAN frames' dlc of one SAMPLE_SENSORS (segmented, SPEC 7.4: 7 payload bytes behind
+    a one-byte header per frame, the last frame shorter)."""
+    n = sample_sensors_payload_bytes(sensor_set)
+    full, rest = divmod(n, CAN_SEGMENT_BYTES)
+    return (8,) * full + ((1 + rest,) if rest else ())
 
 
 def uart_time_s(nbytes: float, baud: int) -> float:
@@ -63,8 +89,9 @@ def can_frame_bits(dlc: int, stuffed: bool = False) -> int:
     return bits
 
 
-def can_message_bits(message: str, stuffed: bool = False) -> int:
-    return sum(can_frame_bits(dlc, stuffed) for dlc in CAN_DLC[message])
+def can_message_bits(message: str, stuffed: bool = False, sensor_set: int = 0) -> int:
+    dlcs = sample_sensors_can_dlc(sensor_set) if message == "SAMPLE_SENSORS" else CAN_DLC[message]
+    return sum(can_frame_bits(dlc, stuffed) for dlc in dlcs)
 
 
 def wire_time_table(bauds=(115_200, 921_600, 2_000_000, 3_000_000),
@@ -161,11 +188,14 @@ class WireModel:
         return self.answer_arrival_s(at_board + compute_s, in_bytes) - t_s
 
     def lockstep_period_s(self, answer: str = "GATES", compute_s: float = 0.0,
-                          periods: int = 64, in_bytes: int | None = None) -> float:
-        """Mean modelled wall time of one lockstep period (SAMPLE, then the answer: ``in_bytes``
-        if given, e.g. GATES + TELEMETRY), over ``periods`` periods from a USB frame boundary
-        (the grid's phase may change from period to period)."""
-        out_b = serial_frame_bytes("SAMPLE")
+                          periods: int = 64, in_bytes: int | None = None,
+                          sensor_set: int | None = None) -> float:
+        """Mean modelled wall time of one lockstep period (SAMPLE, or a sensor-set board's
+        SAMPLE_SENSORS for `sensor_set`, then the answer: ``in_bytes`` if given, e.g. GATES +
+        TELEMETRY), over ``periods`` periods from a USB frame boundary (the grid's phase may
+        change from period to period)."""
+        out_b = serial_frame_bytes("SAMPLE") if sensor_set is None else \
+            serial_frame_bytes("SAMPLE_SENSORS", sensor_set)
         in_b = serial_frame_bytes(answer) if in_bytes is None else in_bytes
         t = 0.0
         for _ in range(periods):

@@ -24,6 +24,8 @@ from plant_rt import TRUTH_FIELDS
 from protocol import ccodec
 from protocol.messages import Telemetry
 
+from hil.boards.sensor_fields import ALL_SENSOR_FIELDS, SAMPLE_GROUP, WINDING_TEMPERATURE_SIGNAL
+
 #: Periods between two batched writes of the full-rate channels to the log.
 LOG_BATCH_PERIODS = 256
 
@@ -45,11 +47,16 @@ STEP_SIGNALS = ("ctrl.fault_code", "fault.active_bits", "board.state", "board.re
 #: ``field``. A step signal ``board.state`` is the ``value`` of topic /step/board.state,
 #: written at the first logged period, then at each change. `log_source` and `plan_name` are the one mapping between the two.
 LOG_TOPICS = {"plant": "/plant/truth", "sensor": "/plant/sensors", "ctrl": "/ctrl/telemetry",
-              "cmd": "/cmd"}
+              "cmd": "/cmd", SAMPLE_GROUP: "/plant/sample_sensors"}
+#: A sensor-set board's SAMPLE_SENSORS fields (``sample.<field>``, only its set's) and the
+#: plant's winding temperature, one row a period, in their own topic: a board that gets today's
+#: SAMPLE has neither and its log is what it always was.
+SAMPLE_SENSORS_TOPIC = LOG_TOPICS[SAMPLE_GROUP]
+_WINDING_FIELD = WINDING_TEMPERATURE_SIGNAL.partition(".")[2]
 STEP_TOPIC_PREFIX = "/step/"
 STEP_FIELD = "value"
 _GROUP_FIELDS = {"plant": TRUTH_FIELDS, "sensor": SENSOR_FIELDS, "ctrl": TELEMETRY_FIELDS,
-                 "cmd": COMMAND_FIELDS}
+                 "cmd": COMMAND_FIELDS, SAMPLE_GROUP: ALL_SENSOR_FIELDS}
 #: Topics whose messages are changes of a value held until the next (commands, step signals).
 HELD_TOPICS = ("/cmd",)
 
@@ -60,6 +67,8 @@ def log_source(name: str) -> tuple[str, str] | None:
     group, dot, field = name.partition(".")
     if not (dot and group and field):
         return None
+    if name == WINDING_TEMPERATURE_SIGNAL:
+        return SAMPLE_SENSORS_TOPIC, _WINDING_FIELD
     if field in _GROUP_FIELDS.get(group, ()):
         return LOG_TOPICS[group], field
     return STEP_TOPIC_PREFIX + name, STEP_FIELD
@@ -67,6 +76,8 @@ def log_source(name: str) -> tuple[str, str] | None:
 
 def plan_name(topic: str, field: str) -> str | None:
     """The signal name plans use for `field` of `topic` in a run log, None if it has none."""
+    if topic == SAMPLE_SENSORS_TOPIC and field == _WINDING_FIELD:
+        return WINDING_TEMPERATURE_SIGNAL
     for group, group_topic in LOG_TOPICS.items():
         if topic == group_topic:
             return f"{group}.{field}" if field in _GROUP_FIELDS[group] else None
@@ -166,6 +177,12 @@ class Recorder:
         # hil.live.LiveStream (or anything with period(), telemetry_row() and `every`): every
         # `every`-th row goes to the live viewers too
         self.live = None
+        # a sensor-set board's rows (record_sample_sensors): period + fields (+ temperature)
+        self.sample_fields: tuple[str, ...] = ()
+        self._sample_stage: np.ndarray | None = None
+        self._sample_fill = 0
+        self._sample_blocks: list[np.ndarray] = []
+        self._sample_ch = None
 
     def attach_log(self, log) -> None:
         """Logs the periods from now on (what came before stays in memory only)."""
@@ -182,6 +199,45 @@ class Recorder:
             [("period", "fixed32")] + [(f, "fixed32" if i < 4 else "float")
                                        for i, f in enumerate(TELEMETRY_FIELDS)])
         log.before_flush(self.seal)
+        if self._sample_stage is not None:
+            self._add_sample_channel()
+
+    def record_sample_sensors(self, fields: tuple[str, ...], temperature: bool) -> None:
+        """From now on every period also has a row of `fields` (a sensor-set board's
+        SAMPLE_SENSORS fields, ``sample.<field>``) and, with `temperature`, the plant's winding
+        temperature (plant.winding_temperature_degc): `sample_row` writes it."""
+        self.seal()
+        self.sample_fields = tuple(fields) + ((_WINDING_FIELD,) if temperature else ())
+        self._sample_stage = np.empty((LOG_BATCH_PERIODS, 1 + len(self.sample_fields)))
+        self._sample_fill = 0
+        if self._log is not None:
+            self._add_sample_channel()
+
+    def _add_sample_channel(self) -> None:
+        self._sample_ch = self._log.add_fixed_channel(
+            SAMPLE_SENSORS_TOPIC, "hil.SampleSensors",
+            [("period", "fixed32")] + [(f, "float" if f == _WINDING_FIELD else "fixed32")
+                                       for f in self.sample_fields])
+
+    def sample_row(self, k: int, values: tuple) -> None:
+        """Period k's row of the fields record_sample_sensors named, in that order."""
+        n = self._sample_fill
+        stage = self._sample_stage
+        stage[n, 0] = k
+        stage[n, 1:] = values
+        self._sample_fill = n + 1
+        if n + 1 >= LOG_BATCH_PERIODS:
+            self._seal_samples()
+
+    def _seal_samples(self) -> None:
+        n = self._sample_fill
+        if not n:
+            return
+        self._sample_fill = 0
+        rows = self._sample_stage[:n].copy()
+        self._sample_blocks.append(rows)
+        if self._sample_ch is not None:
+            self._sample_ch.write_many(_log_times(rows[:, 0], self.period_s), rows)
 
     def period(self, k: int, truth: tuple, sample) -> None:
         if _STAGE_PERIOD is None or type(truth) is not tuple:
@@ -239,6 +295,8 @@ class Recorder:
         fill = self._fill
         n, m = int(fill[0]), int(fill[1])
         fill[0] = fill[1] = 0
+        if self._sample_fill:
+            self._seal_samples()
         if n:
             sensors = self._sensor_stage[:n].copy()
             truth = self._truth_stage[:n].copy()
@@ -311,6 +369,16 @@ class Recorder:
             return self._sensor_blocks[-1][-1, 1:] if self._sensor_blocks else None
         return blocks[-1][-1] if blocks else None
 
+    def latest_sample(self, field: str) -> float:
+        """The newest value of a sample_row field (``hall``, ``winding_temperature_degc``),
+        NaN before the first or when this run does not record it."""
+        if field not in self.sample_fields:
+            return math.nan
+        i = self.sample_fields.index(field) + 1
+        if self._sample_fill:
+            return float(self._sample_stage[self._sample_fill - 1, i])
+        return float(self._sample_blocks[-1][-1, i]) if self._sample_blocks else math.nan
+
     def latest(self, group: str, index: int) -> float:
         """Value `index` of the newest truth, sensors or telemetry row (the row's order:
         telemetry's starts with the period), NaN before the first."""
@@ -322,7 +390,7 @@ class Recorder:
         to the log the ones it does not have yet."""
         self.seal()
         for blocks in (self._period_blocks, self._truth_blocks, self._sensor_blocks,
-                       self._telemetry_blocks):
+                       self._telemetry_blocks, self._sample_blocks):
             blocks.clear()
 
     def command(self, k: int, row: tuple) -> None:
@@ -403,6 +471,14 @@ class Recorder:
                     idx = np.searchsorted(at, k, side="right") - 1
                     values[idx >= 0] = np.asarray([r[1] for r in rows])[idx[idx >= 0]]
                 out[name] = (t, values, "")
+        if self.sample_fields:
+            rows = _joined(self._sample_blocks, self._sample_stage[:self._sample_fill],
+                           (0, 1 + len(self.sample_fields)))
+            t_sample = rows[:, 0] * self.period_s
+            for i, name in enumerate(self.sample_fields):
+                signal = (WINDING_TEMPERATURE_SIGNAL if name == _WINDING_FIELD
+                          else f"{SAMPLE_GROUP}.{name}")
+                out[signal] = (t_sample, rows[:, i + 1], "degC" if name == _WINDING_FIELD else "")
         tel = self.telemetry_rows
         if len(tel):
             t_tel = tel[:, 0] * self.period_s

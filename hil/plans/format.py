@@ -26,7 +26,7 @@ from configfile.dataclass_methods import dataclass
 from hil.plans.checks import CHECK_KINDS, STATISTICS, ArgSpec, CheckKind, result_unit
 from hil.plans.formula import Derivation
 from hil.plans.limits import Limits
-from hil.plans.signals import SIGNAL_CATALOG
+from hil.plans.signals import SENSOR_SET_SIGNALS, SIGNAL_CATALOG
 from hil.plans.units import Quantity, UnitError, canonical, compatible, unit as lookup_unit
 from hil.boards.standard import STANDARD_PARAMS
 from configfile.schema import (BOOLEAN, FRACTION, NAME, NON_NEGATIVE, NUMBER, POSITIVE, POSITIVE_INT,
@@ -922,6 +922,8 @@ class _BuildState:
 
     # ---------------------------------------------------------------- pieces
     def known_signal(self, name: str, path: KeyPath) -> str:
+        if name in SENSOR_SET_SIGNALS:      # the board's set decides (runner.check_plan_board)
+            return SENSOR_SET_SIGNALS[name]
         if name not in SIGNAL_CATALOG:
             import difflib      # an unknown signal's message only; not worth importing per plan
 

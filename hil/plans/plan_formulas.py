@@ -47,7 +47,8 @@ _SUFFIX_UNITS: tuple[tuple[str, str], ...] = (
 )
 # The units SPEC 8 writes its parameters in, as formulas read them.
 _SPEC_UNITS = {"N m": "Nm", "N m/(rad/s)": "Nm/(rad/s)", "N m/rad": "Nm/rad", "A/count": "A",
-               "V/count": "V", "period": "count", "cycle": "count"}
+               "V/count": "V", "period": "count", "cycle": "count",
+               "degC/count": "degC"}
 # Top-level keys whose strings are never formulas.
 _NOT_FORMULAS = ("name", "description", "profile", "profiles", "overrides", "link", "board",
                  "mode", "constants")

@@ -39,6 +39,19 @@ _CMD = {"speed_ref_rpm": "rpm", "enable": "1", "speed_source": "1", "torque_mode
 _STEP = {"ctrl.fault_code": "1", "fault.active_bits": "1", "board.state": "1", "board.ready": "1",
          "ctrl.leg_enable": "1"}
 
+# What a sensor-set board was sent (SAMPLE_SENSORS, hil/boards/sensor_fields.py), and the
+# plant's winding temperature logged beside it: recorded only on such a board (and the
+# temperature also when the profile's thermal model is on), so plans name them apart from the
+# catalogue every run records; hil.run.runner.check_plan_board refuses one a run will not have.
+_SAMPLE = {"adc_ia": "count", "adc_ib": "count", "adc_ic": "count", "adc_vdc": "count",
+           "encoder": "count", "hall": "1", "adc_va": "count", "adc_vb": "count",
+           "adc_vc": "count", "bemf_comparators": "1", "adc_resolver_sin": "count",
+           "adc_resolver_cos": "count", "adc_temperature": "count"}
+SENSOR_SET_SIGNALS: dict[str, str] = {
+    **{f"sample.{k}": v for k, v in _SAMPLE.items()},
+    "plant.winding_temperature_degc": "degC",
+}
+
 #: Every signal a plan may name, with its unit. Angles are wrapped to (-pi, pi].
 SIGNAL_CATALOG: dict[str, str] = {
     **{f"plant.{k}": v for k, v in _PLANT.items()},
@@ -57,7 +70,7 @@ def register_signal(name: str, unit: str) -> None:
 
 
 def catalog_unit(name: str) -> str | None:
-    return SIGNAL_CATALOG.get(name)
+    return SIGNAL_CATALOG.get(name) or SENSOR_SET_SIGNALS.get(name)
 
 
 class MissingSignalError(KeyError):
@@ -161,8 +174,8 @@ class SignalSet(Mapping[str, Signal]):
         """
         out = cls()
         for name, (t, v, unit) in arrays.items():
-            if not unit and name in SIGNAL_CATALOG:
-                unit = SIGNAL_CATALOG[name]
+            if not unit and catalog_unit(name) is not None:
+                unit = catalog_unit(name)
             out.add(Signal(name, t, v, unit or "1"))
         return out
 
@@ -185,5 +198,5 @@ class SignalSet(Mapping[str, Signal]):
         return out
 
 
-__all__ = ["Signal", "SignalSet", "SIGNAL_CATALOG", "MissingSignalError", "register_signal",
+__all__ = ["Signal", "SignalSet", "SIGNAL_CATALOG", "SENSOR_SET_SIGNALS", "MissingSignalError", "register_signal",
            "catalog_unit"]

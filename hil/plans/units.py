@@ -63,6 +63,8 @@ _UNITS: tuple[Unit, ...] = (
     Unit("uH", "inductance", 1e-6),
     Unit("W", "power", 1.0),
     Unit("kgm^2", "inertia", 1.0),
+    # a temperature only in degC: no kelvin, whose offset this multiplicative table cannot hold
+    Unit("degC", "temperature", 1.0),
 )
 
 # Other spellings people write; each maps to a canonical symbol above.
@@ -74,6 +76,7 @@ _ALIASES = {
     "N*m": "Nm", "N·m": "Nm", "N.m": "Nm", "mN*m": "mNm",
     "Ω": "ohm", "Ohm": "ohm", "mΩ": "mohm", "µH": "uH", "μH": "uH",
     "kg*m^2": "kgm^2", "kgm2": "kgm^2",
+    "°C": "degC", "degc": "degC",
 }
 
 UNITS: dict[str, Unit] = {u.symbol: u for u in _UNITS}

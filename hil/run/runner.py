@@ -39,7 +39,7 @@ from hil.links.registry import LinkUnavailable
 from hil.session.bench_session import _fault_text as fault_text    # SPEC 2.9's wording
 from hil.session.board_state import fault_name
 from hil.control_inputs import ControlLimits
-from hil.plans.signals import SignalSet
+from hil.plans.signals import SENSOR_SET_SIGNALS, SignalSet
 from configfile.dataclass_methods import dataclass
 from configfile.source import ConfigError
 
@@ -147,7 +147,8 @@ def board_for(plan: Plan, link: str | None = None, board=None):
 
 def check_plan_board(plan: Plan, board) -> None:
     """Every `param_set` of the plan names a parameter the board takes, with a value in its
-    range: ConfigError naming the plan's file, line and key, before anything runs."""
+    range, and every sensor-set signal it names (``sample.hall``) is one the board's
+    `sensors:` carries: ConfigError naming the plan's file, line and key, before anything runs."""
     for step in plan.steps:
         if not isinstance(step, ParamSetStep):
             continue
@@ -156,6 +157,50 @@ def check_plan_board(plan: Plan, board) -> None:
             if problem is not None:
                 raise ConfigError(problem, str(plan.source_path), step.line,
                                   f"steps[{step.index}].param_set.{name}")
+    recorded = sensor_set_signals(board)
+    for line, key, name in _signal_uses(plan):
+        if name in SENSOR_SET_SIGNALS and name not in recorded:
+            raise ConfigError(_unrecorded_why(name, board), str(plan.source_path), line, key)
+
+
+def sensor_set_signals(board) -> set[str]:
+    """The sensor-set signals (hil.plans.signals.SENSOR_SET_SIGNALS) a run on `board` records:
+    ``sample.<field>`` of each field of its `sensors:`, and the winding temperature on a
+    board with a sensor set."""
+    from hil.boards.sensor_fields import WINDING_TEMPERATURE_SIGNAL, fields_of_set
+
+    mask = board.sensor_set
+    out = {f"sample.{f}" for f in fields_of_set(mask)}
+    if mask:
+        out.add(WINDING_TEMPERATURE_SIGNAL)
+    return out
+
+
+def _unrecorded_why(name: str, board) -> str:
+    from hil.boards.sensor_fields import sensor_of_signal
+
+    sensor = sensor_of_signal(name)
+    has = f"its sensors: [{', '.join(board.sensors)}]" if board.sensors else \
+        "it has no sensors: list (today's SAMPLE)"
+    if sensor is None:
+        return (f"signal '{name}' is recorded only on a board with a sensor set; board "
+                f"'{board.name}' ({board.source}): {has}")
+    return (f"signal '{name}' needs sensor '{sensor}' in the board's sensor set; board "
+            f"'{board.name}' ({board.source}): {has}")
+
+
+def _signal_uses(plan: Plan):
+    """(line, key, signal) of every signal the plan names: waits, checks, plots."""
+    for step in plan.steps:
+        if isinstance(step, WaitUntilStep):
+            yield step.line, f"steps[{step.index}].wait_until.signal", step.signal
+        elif isinstance(step, CheckStep):
+            for role, value in step.roles.items():
+                if isinstance(value, str):
+                    yield step.line, f"steps[{step.index}].check.{role}", value
+    for j, spec in enumerate(plan.plots):
+        for name in spec.signals:
+            yield spec.line, f"plots[{j}]", name
 
 
 def plan_runs(plans: Iterable[Plan], profile=None) -> list[tuple[Plan, ProfileRef]]:
@@ -239,6 +284,9 @@ def live_getter(session: BenchSession, name: str) -> Callable[[], float]:
     if group == "cmd" and fld in COMMAND_FIELDS:
         i = COMMAND_FIELDS.index(fld) + 1
         return lambda: rec.command_rows[-1][i] if rec.command_rows else math.nan
+    if name in SENSOR_SET_SIGNALS:    # a sensor-set board's sample.*, the winding temperature
+        field = "winding_temperature_degc" if group == "plant" else fld
+        return lambda: rec.latest_sample(field)
     if name in rec.step_rows:       # board.state, board.ready, ctrl.fault_code, ...: 0 until set
         rows = rec.step_rows[name]
         return lambda: rows[-1][1] if rows else 0.0

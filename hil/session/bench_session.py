@@ -41,6 +41,7 @@ from hil.session.errors import SessionError
 from hil.session.link_tap import LinkTap, tappable
 from hil.session.policy import CAPABILITY_NAMES, SessionPolicy
 from hil.session.realtime import run_realtime
+from hil.session.sensor_set import SensorSampler, names_text, read_sensor_set
 from hil.session.watchdog import Watchdog, await_answer
 
 RPM_PER_RAD_S = 60.0 / (2.0 * math.pi)
@@ -201,6 +202,10 @@ class BenchSession:
         self.tap: LinkTap | None = None
         self.rt_stats: dict[str, Any] = {}
         self.cpu_latency = CpuLatencyHold()
+        # SPEC 6.13: the board's sensor set (None: no SENSOR_SET capability, today's SAMPLE)
+        # and what makes its SAMPLE_SENSORS every period
+        self.sensor_set: int | None = None
+        self.sensor_sampler: SensorSampler | None = None
 
     # ----------------------------------------------------------------- setup
     def __enter__(self) -> "BenchSession":
@@ -235,8 +240,9 @@ class BenchSession:
         self._apply_link_waits()
         try:
             self._handshake()
+            self._start_sensor_set()
             self._push_parameters(board_parameters(self.profile, self.board,
-                                                   self.profile_label))
+                                                   self.profile_label, self.sensor_set))
         except SessionError as exc:
             self.plant.safe_state()
             self.error = str(exc)
@@ -366,6 +372,16 @@ class BenchSession:
         self.board_hello = hello
         self._event("hello", {"board": _name(hello), "proto_version": hello.proto_version,
                               "capabilities": caps, "control_period_ns": hello.control_period_ns})
+
+    def _start_sensor_set(self) -> None:
+        """SPEC 6.13: a board with the SENSOR_SET capability says its set (checked against its
+        board file); it gets SAMPLE_SENSORS from the plant's sensor frame from now on."""
+        self.sensor_set = read_sensor_set(self)
+        if self.sensor_set is None:
+            return
+        self.sensor_sampler = SensorSampler(self.plant, self.sensor_set, self.recorder)
+        self._event("sensor_set", {"sensor_set": self.sensor_set,
+                                   "sensors": names_text(self.sensor_set)})
 
     def _hello_silence(self) -> str:
         """What arrived instead of a HELLO: every non-zero error counter (SPEC 2.9)."""
@@ -625,7 +641,10 @@ class BenchSession:
             run.record_telemetry = run.dispatch
         # A firmware library in this process with the C codec: SAMPLE out and the answers in
         # through one C call while no link fault is active (hil/session/link_tap.py).
-        run.fast = fast = tap.sample_exchanger() if tap is not None else None
+        # A sensor-set board's SAMPLE_SENSORS is made from the plant's Python sensor frame:
+        # this loop sends it (the C exchange and period loop know only SAMPLE).
+        python_only = self.sensor_sampler is not None
+        run.fast = fast = tap.sample_exchanger() if tap is not None and not python_only else None
         # The plain periods in between, each one the C loop (ccodec.exchange_periods: the same
         # steps, the same order, no Python frame) while nothing needs this loop: no mailbox or
         # per-period stimulus, the answer kind known and no miss being counted; it hands back
@@ -634,7 +653,7 @@ class BenchSession:
         run.exchange_periods = None
         run.live_every = 0
         run.direct = direct = fast is None   # the descriptor kind (LinkTap.descriptor_target)
-        if (tap is not None and mailbox is None
+        if (tap is not None and mailbox is None and not python_only
                 and self.board_hello is not None
                 and (on_period is None or getattr(on_period, "idle", False))):
             target = tap.descriptor_target(answer_timeout) if direct else fast.args
@@ -666,14 +685,18 @@ class BenchSession:
         mailbox = run.mailbox
         if mailbox is not None and mailbox.pending:
             self._apply_mailbox(mailbox)
-        sample = run.plant.sample()
+        sampler = self.sensor_sampler
+        if sampler is None:
+            sample, msg_out = run.plant.sample(), None
+        else:
+            sample, msg_out = sampler()
         k = sample.period
         tap = run.tap
         if tap is not None:
             tap.tick(k)
             if k % run.publish_every == 0:
                 run.recorder.frames(k, tap.take_capture())
-        answer = self._exchange_period(run, k, sample, pending, sent_at)
+        answer = self._exchange_period(run, k, sample, pending, sent_at, msg_out)
         if answer.gates is None and answer.duty is None:
             self._answer_missed(run, k, answer)
         else:
@@ -684,8 +707,9 @@ class BenchSession:
             self._publish(mailbox, k)
 
     def _exchange_period(self, run: _Lockstep, k: int, sample, pending: bool,
-                         sent_at: float | None) -> _PeriodAnswer:
-        """SAMPLE(k) out, up to run.sends times, each with its own deadline; the period's
+                         sent_at: float | None, msg_out=None) -> _PeriodAnswer:
+        """SAMPLE(k) (or a sensor-set board's SAMPLE_SENSORS(k), `msg_out`) out, up to
+        run.sends times, each with its own deadline, the same message each time; the period's
         record made while the board computes; what came back. A link failure fails the
         session (the period recorded first)."""
         answer = run.answer
@@ -693,7 +717,6 @@ class BenchSession:
         fast = run.fast
         tap = run.tap
         answer_timeout = run.answer_timeout
-        msg_out = None
         recorded = pending
         recording = False
         try:

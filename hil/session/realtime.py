@@ -87,6 +87,7 @@ def run_realtime(session, count: int, stop: Callable[[], bool] | None = None,
     latest_gates = latest_duty = latest_legs = None
     clock = time.perf_counter_ns
     sleep = time.sleep
+    sampler = session.sensor_sampler    # a sensor-set board's SAMPLE_SENSORS (SPEC 6.13)
     stats["cpu_dma_latency"] = session.cpu_latency.status
     t0 = clock()
     done = 0
@@ -124,7 +125,10 @@ def run_realtime(session, count: int, stop: Callable[[], bool] | None = None,
         tick = clock()
         late_s = (tick - deadline) / 1e9
         lateness.append(late_s)
-        sample = plant.sample()
+        if sampler is None:
+            sample, msg_out = plant.sample(), None
+        else:
+            sample, msg_out = sampler()
         k = sample.period
         if late_s > period_s:
             misses += 1
@@ -143,8 +147,10 @@ def run_realtime(session, count: int, stop: Callable[[], bool] | None = None,
                 session.event("watchdog", period=k, reason=why)
                 _store(stats, lateness, period_s, late_answers, missing, overruns)
                 raise SessionError(session.error)
-        link.send(Sample(k, sample.adc_i1, sample.adc_i2, sample.adc_vdc, sample.encoder,
-                         sample.status))
+        if msg_out is None:
+            msg_out = Sample(k, sample.adc_i1, sample.adc_i2, sample.adc_vdc, sample.encoder,
+                             sample.status)
+        link.send(msg_out)
         recorder.period(k, plant.truth(), sample)
         if latest_duty is None:
             plant.step(latest_gates)
