@@ -197,6 +197,9 @@ class Network:
         e = m.p * y[3]
         c, s = cos(e), sin(e)
         if self.all_zero:
+            if m.trapezoidal:
+                y[0], y[1], _, _ = m.magnet_flux_ab(e)
+                return
             y[0] = m.psim * c
             y[1] = m.psim * s
             return
@@ -258,6 +261,8 @@ class Network:
             ) -> tuple[float, float, float, float, float, float, float, float]:
         """(dpsi_a, dpsi_b, dw, dtheta, dv_dc, u_alpha, u_beta, i_dc) at time t (s, absolute)."""
         m = self.motor
+        if m.trapezoidal:
+            return self._rhs_shaped(t, pa, pb, w, th, v)
         p, r, psim, ild, ilq = m.p, m.r, m.psim, m.ild, m.ilq
         e = p * th
         c = cos(e)
@@ -324,6 +329,72 @@ class Network:
             t_a, v0, slope = self._tl
             dw = (te - m.b * w - ((v0 + slope * (t - t_a)) + self.load.kw * w)) * m.ij
         return dpa, dpb, dw, w, dc.dv_dt(v, idc), va, vb, idc
+
+    def _rhs_shaped(self, t: float, pa: float, pb: float, w: float, th: float, v: float
+                    ) -> tuple[float, float, float, float, float, float, float, float]:
+        """rhs() of the trapezoidal machine (Ld = Lq = L; plant_rt.motor's magnet_flux_ab):
+        i_ab = (psi_ab - psi_m,ab)/L, back-EMF e_ab = omega_e psi_m,ab', torque
+        1.5 p psi_m,ab' . i_ab. A floating phase x keeps d i_x/dt = 0:
+        x . (u_ab + 2/3 x V_x - R i_ab - e_ab) = 0 with |x| = 1 gives V_x."""
+        m = self.motor
+        r, ild = m.r, m.ild
+        ma, mb, da, db = m.magnet_flux_ab(m.p * th)
+        we = m.p * w
+        dc = self.dc
+        if self.all_zero:
+            va = we * da
+            vb = we * db
+            dpa, dpb, te, idc = va, vb, 0.0, 0.0
+            vdc = dc.voltage(v, 0.0)
+            self.cur = (0.0, 0.0, 0.0)
+            self._emf = (va, vb)
+        else:
+            ia = (pa - ma) * ild
+            ib = (pb - mb) * ild
+            cur = (ia, -0.5 * ia + S32 * ib, -0.5 * ia - S32 * ib)
+            kinds = self.kinds
+            idc = 0.0
+            for x in range(3):
+                if kinds[x] == H or kinds[x] == N:
+                    idc += cur[x]
+            vdc = dc.voltage(v, idc)
+            va, vb = self._terminal_ab(kinds, cur, vdc)
+            if self.zero:
+                ex0, ex1 = PHASE_AXES[self.zero[0]]
+                vx = -(ex0 * (va - r * ia - we * da) + ex1 * (vb - r * ib - we * db)) / TWO_THIRDS
+                va += TWO_THIRDS * ex0 * vx
+                vb += TWO_THIRDS * ex1 * vx
+                self.vx = vx
+            dpa = va - r * ia
+            dpb = vb - r * ib
+            te = m.kt * (da * ia + db * ib)
+            self.cur = cur
+        self.vdc = vdc
+        self.te = te
+        if self.load.locked:
+            dw = 0.0
+        else:
+            t_a, v0, slope = self._tl
+            dw = (te - m.b * w - ((v0 + slope * (t - t_a)) + self.load.kw * w)) * m.ij
+        return dpa, dpb, dw, w, dc.dv_dt(v, idc), va, vb, idc
+
+    def _terminal_ab(self, kinds: list[int], cur: tuple, vdc: float) -> tuple[float, float]:
+        """u_ab of the driven and diode-conducting terminals (eq. (7); an O phase adds 0)."""
+        ud = self.ud
+        vt = [0.0, 0.0, 0.0]
+        for x in range(3):
+            k = kinds[x]
+            if k == H or k == L:
+                drop = 0.0
+                if ud:
+                    z = cur[x] / self.knee
+                    drop = ud * (1.0 if z > 1.0 else -1.0 if z < -1.0 else z)
+                vt[x] = (vdc if k == H else 0.0) - drop
+            elif k == P:
+                vt[x] = -ud
+            elif k == N:
+                vt[x] = vdc + ud
+        return (2.0 * vt[0] - vt[1] - vt[2]) / 3.0, (vt[1] - vt[2]) * INV_SQRT3
 
     def _release(self, va: float, vb: float, vdc: float) -> None:
         """With no current anywhere: how far the first pair of legs is from conducting.
@@ -502,7 +573,10 @@ class Network:
                 q4 = dc.dv_dt(v + h * q3, 0.0)
                 v += h / 6.0 * (q1 + 2.0 * (q2 + q3) + q4)
         e = m.p * th
-        out = [m.psim * cos(e), m.psim * sin(e), w, th, v]
+        if m.trapezoidal:
+            out = [*m.magnet_flux_ab(e)[:2], w, th, v]
+        else:
+            out = [m.psim * cos(e), m.psim * sin(e), w, th, v]
         self.rhs(t1, *out)
         self._release(self._emf[0], self._emf[1], self.vdc)
         if self.g_release > 0.0:

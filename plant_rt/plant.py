@@ -134,7 +134,8 @@ class Plant:
         self._ripple: tuple[float, float] | None = None                   # amplitude, Hz
         self._param_ramps: dict[str, tuple[float, float, float, float, int]] = {}
         self._vectors: list = [None] * 64
-        self._ckernel = ckernel.KERNEL
+        # the C kernel is sinusoidal only: the trapezoidal machine runs the Python paths
+        self._ckernel = None if self.motor.trapezoidal else ckernel.KERNEL
         self.network.ckernel = self._ckernel
         self._timeline.kernel = self._ckernel
         self._bind_readout(self._ckernel)
@@ -162,6 +163,9 @@ class Plant:
         Python (False: the reference); an object with the extension's functions is used as
         the kernel (tests wrap the extension so)."""
         kernel = None
+        if on is not False and on is not None and self.motor.trapezoidal:
+            raise ValueError("the C kernel is sinusoidal only: motor back_emf trapezoidal "
+                             "runs in Python")
         if on is True:
             kernel = ckernel.EXTENSION
             if kernel is None:
@@ -493,8 +497,8 @@ class Plant:
             for c, d in lo:
                 on += d - c
             if ud > 0.0 or on < T * (1.0 - 1e-12):
-                if not m.spm:
-                    return False        # the sign check below is written for Ld = Lq
+                if not m.spm or m.trapezoidal:
+                    return False        # the sign check below is written for sinusoidal Ld = Lq
                 if cur0 is None:
                     ia, ib, _, _ = m.currents(y_pa, y_pb, y_th)
                     cur0 = (ia, -0.5 * ia + S32 * ib, -0.5 * ia - S32 * ib)
@@ -636,11 +640,14 @@ class Plant:
         with that word and keeps it if no diode current reached zero; False leaves y as it
         was for the general network (dead time costs little away from current zeros)."""
         m = self.motor
-        e = m.p * y[3]
-        c, s = cos(e), sin(e)
-        i_d = (c * y[0] + s * y[1] - m.psim) * m.ild
-        i_q = (c * y[1] - s * y[0]) * m.ilq
-        ia, ib = c * i_d - s * i_q, s * i_d + c * i_q
+        if m.trapezoidal:
+            ia, ib, _, _ = m.currents(y[0], y[1], y[3])
+        else:
+            e = m.p * y[3]
+            c, s = cos(e), sin(e)
+            i_d = (c * y[0] + s * y[1] - m.psim) * m.ild
+            i_q = (c * y[1] - s * y[0]) * m.ilq
+            ia, ib = c * i_d - s * i_q, s * i_d + c * i_q
         cur = (ia, -0.5 * ia + S32 * ib, -0.5 * ia - S32 * ib)
         legs = _LEG_STATES[word]
         equivalent = 0
@@ -696,6 +703,10 @@ class Plant:
         th = self._th
         if self._zero_current:
             ia = ib = 0.0
+        elif self.motor.trapezoidal:
+            ia, ib, _, _ = self.motor.currents(self._pa, self._pb, th)
+            if self._open_phase is not None:
+                ia, ib = _cut_phase(self._open_phase, ia, ib)[3:]
         else:
             m = self.motor
             e = m.p * th
@@ -815,7 +826,7 @@ class Plant:
         else:
             ia, ib, i_d, i_q = m.currents(pa, pb, th)
         t = self.period * self._T
-        te = m.torque(i_d, i_q)
+        te = m.torque_ab(ia, ib, th) if m.trapezoidal else m.torque(i_d, i_q)
         tl = te if self.load.locked else self.load.torque(t, w)
         T = self._T
         if self._open_phase is not None and not self._zero_current:
@@ -916,8 +927,8 @@ class Plant:
         both axes). The phase currents are continuous across the change (the flux linkage is
         recomputed).
         """
-        if name == "pole_pairs":
-            raise ValueError("pole_pairs cannot change while the plant runs")
+        if name in ("pole_pairs", "back_emf"):
+            raise ValueError(f"{name} cannot change while the plant runs")
         changes = {}
         for field_name in PARAM_ALIASES.get(name, (name,)):
             try:

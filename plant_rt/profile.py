@@ -185,6 +185,8 @@ def _cross_check(profile: BenchProfile, err: Callable[[tuple, str], ConfigError]
                   f"got {profile.inverter.dead_time_s:g}")
     for key, message in profile.dc_link.problems():
         raise err(("dc_link", key), message)
+    for key, message in profile.motor.problems():
+        raise err(("motor", key), message)
 
 
 def _merge(base: dict, over: dict, path: tuple, marks: set[tuple]) -> None:
