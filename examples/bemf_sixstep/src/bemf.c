@@ -31,14 +31,33 @@ void bemf_zc_arm(bemf_zc_detector *zc, bemf_step step, uint32_t tick)
     zc->floating = step.floating;
     zc->rising = step.rising;
     zc->found = 0u;
+    zc->before_seen = 0u;
     zc->armed_tick = tick;
     zc->run = 0u;
     zc->first_tick = tick;
+    zc->first_frac = 1.0f;
     zc->quiet = 0u;
+    zc->last_diff_v = 0.0f;
+}
+
+/* Where between the previous sample (0) and this one (1) the floating
+ * terminal crossed the neutral; the level after the cross may read before the
+ * ADC difference turns (comparator offset, noise): clamped to [0, 1]. */
+static float cross_fraction(float before_v, float after_v, int rising)
+{
+    float b = rising ? before_v : -before_v;
+    float a = rising ? after_v : -after_v;
+    if (!(b < 0.0f)) {
+        return 0.0f;
+    }
+    if (!(a > 0.0f)) {
+        return 1.0f;
+    }
+    return b / (b - a);
 }
 
 int bemf_zc_feed(const bemf_zc_config *cfg, bemf_zc_detector *zc, uint8_t comparators,
-                 float floating_current_a, uint32_t tick, uint32_t *zc_tick)
+                 float floating_current_a, float floating_diff_v, uint32_t tick, bemf_instant *at)
 {
     if (zc->found) {
         return 0;
@@ -54,6 +73,7 @@ int bemf_zc_feed(const bemf_zc_config *cfg, bemf_zc_detector *zc, uint8_t compar
     if (!(fabsf(floating_current_a) <= cfg->demag_current_a)) {
         zc->quiet = 0u;
         zc->run = 0u;
+        zc->before_seen = 0u;
         return 0;
     }
     if (zc->quiet < 2u) {
@@ -64,60 +84,67 @@ int bemf_zc_feed(const bemf_zc_config *cfg, bemf_zc_detector *zc, uint8_t compar
     }
     unsigned bit = (comparators >> zc->floating) & 1u;
     unsigned after = zc->rising ? 1u : 0u;
+    float before_v = zc->last_diff_v;
+    int before_seen = zc->before_seen;
+    zc->last_diff_v = floating_diff_v;
     if (bit != after) {
         zc->run = 0u;
+        zc->before_seen = 1u;
         return 0;
     }
+    zc->before_seen = 0u;
     if (zc->run == 0u) {
         zc->first_tick = tick;
+        zc->first_frac = before_seen ? cross_fraction(before_v, floating_diff_v, zc->rising) : 1.0f;
     }
     zc->run++;
     if (zc->run < (cfg->confirm_samples > 0u ? cfg->confirm_samples : 1u)) {
         return 0;
     }
     zc->found = 1u;
-    *zc_tick = zc->first_tick;
+    at->tick = zc->first_tick - 1u;
+    at->frac = zc->first_frac;
     return 1;
 }
 
 /* ---- zero-cross timing ---------------------------------------------------- */
 
-void bemf_timing_seed(bemf_timing *t, float interval_ticks, uint32_t zc_tick)
+void bemf_timing_seed(bemf_timing *t, float interval_periods, bemf_instant zc)
 {
-    uint32_t slot = interval_ticks >= 1.0f ? (uint32_t)(interval_ticks + 0.5f) : 1u;
     for (unsigned k = 0u; k < BEMF_INTERVALS; ++k) {
-        t->interval_ticks[k] = slot;
+        t->interval_periods[k] = interval_periods > 1.0f ? interval_periods : 1.0f;
     }
-    t->sum_ticks = slot * BEMF_INTERVALS;
     t->next = 0u;
-    t->last_zc_tick = zc_tick;
+    t->last_zc = zc;
 }
 
-uint32_t bemf_timing_zero_cross(bemf_timing *t, uint32_t zc_tick, float lag_ticks, uint32_t now_tick)
+uint32_t bemf_timing_zero_cross(bemf_timing *t, bemf_instant zc, float lag_periods, uint32_t now_tick)
 {
-    uint32_t interval = zc_tick - t->last_zc_tick;
-    if (interval == 0u) {
-        interval = 1u;
+    float interval = (float)(zc.tick - t->last_zc.tick) + (zc.frac - t->last_zc.frac);
+    if (!(interval >= 0.25f)) {
+        interval = 0.25f; /* two crosses within a period: keep the speed finite */
     }
-    t->sum_ticks = t->sum_ticks - t->interval_ticks[t->next] + interval;
-    t->interval_ticks[t->next] = interval;
+    t->interval_periods[t->next] = interval;
     t->next = (t->next + 1u) % BEMF_INTERVALS;
-    t->last_zc_tick = zc_tick;
+    t->last_zc = zc;
     /* 30 electrical degrees after the cross: half the 60-degree interval */
-    float delay = 0.5f * (float)interval - lag_ticks;
-    uint32_t due = zc_tick + (delay > 0.0f ? (uint32_t)(delay + 0.5f) : 0u);
+    float delay = zc.frac + 0.5f * interval - lag_periods;
+    uint32_t due = zc.tick + (delay > 0.0f ? (uint32_t)(delay + 0.5f) : 0u);
     return (int32_t)(due - now_tick) < 0 ? now_tick : due;
 }
 
 float bemf_timing_speed_rad_s(const bemf_timing *t, uint32_t pole_pairs, float period_s)
 {
-    /* six 60-degree intervals are one electrical turn */
-    return BEMF_TWO_PI / ((float)pole_pairs * (float)t->sum_ticks * period_s);
+    float sum = 0.0f;
+    for (unsigned k = 0u; k < BEMF_INTERVALS; ++k) {
+        sum += t->interval_periods[k];
+    }
+    return (float)BEMF_INTERVALS * (BEMF_PI / 3.0f) / ((float)pole_pairs * sum * period_s);
 }
 
-uint32_t bemf_timing_last_interval(const bemf_timing *t)
+float bemf_timing_last_interval(const bemf_timing *t)
 {
-    return t->interval_ticks[(t->next + BEMF_INTERVALS - 1u) % BEMF_INTERVALS];
+    return t->interval_periods[(t->next + BEMF_INTERVALS - 1u) % BEMF_INTERVALS];
 }
 
 /* ---- open-loop start ------------------------------------------------------ */
@@ -226,11 +253,11 @@ static void trip(bemf_drive *d, uint8_t why, float value)
 
 /* Commutates to the next step at `tick`; the detector is armed with a blanking
  * of a fraction of the last 60-degree interval. */
-static void commutate(const bemf_config *cfg, bemf_drive *d, uint32_t interval_ticks)
+static void commutate(const bemf_config *cfg, bemf_drive *d, float interval_periods)
 {
     d->step = bemf_next_step(d->step);
     bemf_zc_arm(&d->zc, bemf_commutation(d->step), d->tick);
-    uint32_t blank = (uint32_t)(cfg->blanking_fraction * (float)interval_ticks);
+    uint32_t blank = (uint32_t)(cfg->blanking_fraction * interval_periods);
     d->blanking_periods = blank > cfg->min_blanking_periods ? blank : cfg->min_blanking_periods;
 }
 
@@ -240,10 +267,13 @@ static float duty_of(float voltage_v, float vdc_v)
     return vdc_v > 1.0f ? clampf(voltage_v / vdc_v, 0.0f, 1.0f) : 0.0f;
 }
 
-static float pair_current(const bemf_drive *d, const float i_abc[3])
+float bemf_pair_current(uint8_t step, const float i_abc[3])
 {
-    bemf_step s = bemf_commutation(d->step);
-    return 0.5f * (i_abc[s.high] - i_abc[s.low]);
+    bemf_step s = bemf_commutation(step);
+    float in = i_abc[s.high];
+    float out = -i_abc[s.low];
+    float magnitude = fmaxf(fabsf(in), fabsf(out));
+    return in + out >= 0.0f ? magnitude : -magnitude;
 }
 
 static void run_align(const bemf_config *cfg, bemf_drive *d, const bemf_inputs *in)
@@ -256,7 +286,7 @@ static void run_align(const bemf_config *cfg, bemf_drive *d, const bemf_inputs *
         d->step = bemf_next_step(cfg->align_step);
         bemf_ramp_reset(&d->ramp, &cfg->ramp);
         d->valid_steps = 0u;
-        commutate(cfg, d, 0u);
+        commutate(cfg, d, 0.0f);
         return;
     }
     d->speed_rad_s = 0.0f;
@@ -268,31 +298,40 @@ static float ramp_interval_ticks(const bemf_config *cfg, float speed_rad_s)
     return (BEMF_PI / 3.0f) / (speed_rad_s * (float)cfg->pole_pairs * cfg->control_period_s);
 }
 
-static void hand_over(const bemf_config *cfg, bemf_drive *d, uint32_t zc_tick)
+static void hand_over(const bemf_config *cfg, bemf_drive *d, bemf_instant zc)
 {
     float interval = ramp_interval_ticks(cfg, d->ramp.speed_rad_s);
-    bemf_timing_seed(&d->timing, interval, zc_tick);
-    float delay = 0.5f * interval - cfg->zc_lag_periods;
-    d->commutate_tick = zc_tick + (delay > 0.0f ? (uint32_t)(delay + 0.5f) : 0u);
+    bemf_timing_seed(&d->timing, interval, zc);
+    float delay = zc.frac + 0.5f * interval - cfg->zc_lag_periods;
+    d->commutate_tick = zc.tick + (delay > 0.0f ? (uint32_t)(delay + 0.5f) : 0u);
     d->mode = BEMF_CLOSED;
     d->mode_tick = d->tick;
-    d->last_zc_tick = zc_tick;
-    /* bumpless: the speed loop starts from the open loop's current */
-    float t0 = cfg->torque_constant_nm_per_a * cfg->ramp_current_a;
-    d->speed_pi.integral_nm = clampf(t0, -cfg->speed_gains.torque_limit_nm, cfg->speed_gains.torque_limit_nm);
+    d->last_zc_tick = zc.tick;
+    /* The speed PI starts from zero: the rotor needs next to no torque to hold
+     * the ramp speed, and an integrator preloaded with the open loop's torque
+     * would carry the first speed rise far past its reference. */
+    d->speed_pi.integral_nm = 0.0f;
     d->current_pi.integral_v = 0.0f;
+}
+
+/* The floating terminal's voltage less the virtual neutral (the mean of the three). */
+static float floating_diff(const bemf_inputs *in, uint8_t floating)
+{
+    float neutral = (in->terminal_v[0] + in->terminal_v[1] + in->terminal_v[2]) * (1.0f / 3.0f);
+    return in->terminal_v[floating] - neutral;
 }
 
 static void run_ramp(const bemf_config *cfg, bemf_drive *d, const bemf_inputs *in)
 {
     bemf_zc_config zc_cfg = cfg->zc;
     zc_cfg.blanking_periods = d->blanking_periods;
-    uint32_t zc_tick;
+    bemf_instant zc;
     int at_end_speed = d->ramp.tick >= cfg->ramp.ramp_periods;
-    if (bemf_zc_feed(&zc_cfg, &d->zc, in->comparators, in->phase_current_a[d->zc.floating], d->tick, &zc_tick)) {
-        d->last_zc_tick = zc_tick;
+    if (bemf_zc_feed(&zc_cfg, &d->zc, in->comparators, in->phase_current_a[d->zc.floating],
+                     floating_diff(in, d->zc.floating), d->tick, &zc)) {
+        d->last_zc_tick = zc.tick;
         if (at_end_speed && ++d->valid_steps >= cfg->handover_zero_crosses) {
-            hand_over(cfg, d, zc_tick);
+            hand_over(cfg, d, zc);
             return;
         }
     }
@@ -306,7 +345,7 @@ static void run_ramp(const bemf_config *cfg, bemf_drive *d, const bemf_inputs *i
         if (!d->zc.found) {
             d->valid_steps = 0u;
         }
-        commutate(cfg, d, (uint32_t)ramp_interval_ticks(cfg, d->ramp.speed_rad_s));
+        commutate(cfg, d, ramp_interval_ticks(cfg, d->ramp.speed_rad_s));
     }
     d->speed_rad_s = d->ramp.speed_rad_s;
     /* voltage mode: the back-EMF damps the rotor's swing about the stepping field */
@@ -318,10 +357,11 @@ static void run_closed(const bemf_config *cfg, bemf_drive *d, const bemf_inputs 
 {
     bemf_zc_config zc_cfg = cfg->zc;
     zc_cfg.blanking_periods = d->blanking_periods;
-    uint32_t zc_tick;
-    if (bemf_zc_feed(&zc_cfg, &d->zc, in->comparators, in->phase_current_a[d->zc.floating], d->tick, &zc_tick)) {
-        d->commutate_tick = bemf_timing_zero_cross(&d->timing, zc_tick, cfg->zc_lag_periods, d->tick);
-        d->last_zc_tick = zc_tick;
+    bemf_instant zc;
+    if (bemf_zc_feed(&zc_cfg, &d->zc, in->comparators, in->phase_current_a[d->zc.floating],
+                     floating_diff(in, d->zc.floating), d->tick, &zc)) {
+        d->commutate_tick = bemf_timing_zero_cross(&d->timing, zc, cfg->zc_lag_periods, d->tick);
+        d->last_zc_tick = zc.tick;
     }
     if (d->tick - d->last_zc_tick > cfg->zc_timeout_periods) {
         trip(d, BEMF_TRIP_DESYNC, (float)(d->tick - d->last_zc_tick) * dt);
@@ -360,7 +400,7 @@ bemf_output bemf_drive_step(const bemf_config *cfg, bemf_drive *d, const bemf_in
         }
     }
     if (driving) {
-        d->pair_current_a = pair_current(d, in->phase_current_a);
+        d->pair_current_a = bemf_pair_current(d->step, in->phase_current_a);
         switch (d->mode) {
         case BEMF_ALIGN:
             run_align(cfg, d, in);

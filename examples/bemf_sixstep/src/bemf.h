@@ -48,11 +48,15 @@ uint8_t bemf_next_step(uint8_t step);
  * the current of the phase that just turned off decays through a diode
  * (demagnetisation); that clamp reads as the level *after* the zero cross.
  * So nothing is looked at until the blanking interval is over AND the floating
- * phase's current has decayed below the demagnetisation threshold; then the
- * zero cross is the first of `confirm_samples` consecutive samples at the
- * level after the crossing for this step's direction (as AM32 does: a rotor
- * that is already past its crossing shows it at once, which pulls the
- * commutation forward and keeps the drive in step). */
+ * phase's current has been below the demagnetisation threshold for two
+ * samples (the comparator sees a period's average); then the zero cross is the
+ * first of `confirm_samples` consecutive samples at the level after the
+ * crossing for this step's direction (as AM32 does: a rotor that is already
+ * past its crossing shows it at once, which pulls the commutation forward and
+ * keeps the drive in step). Its time is interpolated between that sample and
+ * the one before from the floating terminal's voltage to the virtual neutral
+ * (the terminal ADCs), when the sample before was looked at and read the level
+ * before the crossing; else it is the first sample's. */
 typedef struct {
     uint32_t blanking_periods;   /* after a commutation: nothing is read */
     float demag_current_a;       /* the floating phase's |current| below which demagnetisation is over */
@@ -62,45 +66,56 @@ typedef struct {
     uint8_t floating;
     uint8_t rising;
     uint8_t found;          /* this step's zero cross is found */
+    uint8_t before_seen;    /* the previous sample was looked at and read the level before the cross */
     uint32_t armed_tick;    /* the commutation's tick */
     uint32_t run;           /* consecutive samples at the level after the crossing */
     uint32_t first_tick;    /* the first of them */
+    float first_frac;       /* the cross at first_tick - 1 + first_frac */
     uint32_t quiet;         /* consecutive samples with the floating current out (demagnetised) */
+    float last_diff_v;      /* the previous sample's floating terminal minus the virtual neutral */
 } bemf_zc_detector;
+
+/* When a zero cross happened: `tick` + `frac` periods, frac in [0, 1]. */
+typedef struct {
+    uint32_t tick;
+    float frac;
+} bemf_instant;
 
 /* Arms the detector for a new step, commutated at `tick`. */
 void bemf_zc_arm(bemf_zc_detector *zc, bemf_step step, uint32_t tick);
-/* Feeds one sample: the comparator bits and the floating phase's current.
- * Returns 1 on the sample that confirms the zero cross, with *zc_tick the tick
- * of the first sample that showed it; 0 otherwise (and after the cross is found). */
+/* Feeds one sample: the comparator bits, the floating phase's current and its
+ * terminal voltage less the virtual neutral (V; any scale, only its sign and
+ * ratio are used). Returns 1 on the sample that confirms the zero cross, with
+ * *at its interpolated time; 0 otherwise (and after the cross is found). */
 int bemf_zc_feed(const bemf_zc_config *cfg, bemf_zc_detector *zc, uint8_t comparators,
-                 float floating_current_a, uint32_t tick, uint32_t *zc_tick);
+                 float floating_current_a, float floating_diff_v, uint32_t tick, bemf_instant *at);
 
 /* ---- zero-cross timing: commutation 30 deg after the cross, speed ---------- */
 
-/* The last six 60-degree intervals (one electrical turn) between zero crosses.
- * The speed is one electrical turn over their sum: the comparator offsets move
- * rising and falling crosses in opposite directions, the sum cancels them. */
-#define BEMF_INTERVALS 6u
+/* The last two 60-degree intervals between zero crosses (a rising and a
+ * falling one: 120 electrical degrees). The speed is their angle over their
+ * sum: short enough a window to follow a start from a few hundred rpm, and
+ * the interpolated crosses keep it smooth. */
+#define BEMF_INTERVALS 2u
 typedef struct {
-    uint32_t last_zc_tick;
-    uint32_t interval_ticks[BEMF_INTERVALS];
+    bemf_instant last_zc;
+    float interval_periods[BEMF_INTERVALS];
     uint32_t next;          /* ring index */
-    uint32_t sum_ticks;
 } bemf_timing;
 
-/* Starts the record with `interval_ticks` (the open-loop ramp's 60-degree time)
- * in every slot, the last cross at `zc_tick`. */
-void bemf_timing_seed(bemf_timing *t, float interval_ticks, uint32_t zc_tick);
-/* Records a zero cross at `zc_tick`. Returns the tick to commutate on: the
- * cross plus half the interval just measured (30 electrical degrees), less the
- * detection lag (`lag_ticks`: the comparator sees a period's average through the
- * terminal filter, about one period late), never before `now_tick`. */
-uint32_t bemf_timing_zero_cross(bemf_timing *t, uint32_t zc_tick, float lag_ticks, uint32_t now_tick);
-/* Mechanical speed (rad/s) from the last electrical turn. */
+/* Starts the record with `interval_periods` (the open-loop ramp's 60-degree
+ * time) in every slot, the last cross at `zc`. */
+void bemf_timing_seed(bemf_timing *t, float interval_periods, bemf_instant zc);
+/* Records a zero cross. Returns the tick to commutate on: the cross plus half
+ * the interval just measured (30 electrical degrees), less the detection lag
+ * (`lag_periods`: the comparator and ADCs see a period's average through the
+ * terminal filter: half a period plus the filter's time constant), rounded to
+ * the nearest period and never before `now_tick`. */
+uint32_t bemf_timing_zero_cross(bemf_timing *t, bemf_instant zc, float lag_periods, uint32_t now_tick);
+/* Mechanical speed (rad/s) from the last intervals. */
 float bemf_timing_speed_rad_s(const bemf_timing *t, uint32_t pole_pairs, float period_s);
-/* The last 60-degree interval, ticks. */
-uint32_t bemf_timing_last_interval(const bemf_timing *t);
+/* The last 60-degree interval, periods. */
+float bemf_timing_last_interval(const bemf_timing *t);
 
 /* ---- open-loop start: align, then a ramp of the commutation frequency ------ */
 
@@ -151,6 +166,14 @@ bemf_current_pi_gains bemf_current_pi_design(float resistance_ohm, float inducta
 float bemf_current_pi_step(const bemf_current_pi_gains *g, bemf_current_pi *pi, float current_ref_a,
                            float current_a, float line_emf_v, float vdc_v, float dt_s);
 
+/* The torque-making current of a step (A, positive into `high`, out of `low`):
+ * the larger of the two driven phases' currents. Through a commutation the
+ * phase the two steps share carries the outgoing phase's decaying current
+ * too, and with both driven EMFs on their flat tops the torque is
+ * 2 p psi times that shared current: regulating the mean of the two would let
+ * it (and the torque) rise half as much again. */
+float bemf_pair_current(uint8_t step, const float i_abc[3]);
+
 /* Mean torque per ampere of pair current with a trapezoidal back-EMF (120-deg
  * flat tops, peak w_e psi) and 120-degree current blocks: both conducting
  * phases sit on their flat tops, T = 2 E I / w_m = 2 p psi I. */
@@ -200,7 +223,7 @@ typedef struct {
     uint32_t mode_tick;            /* tick the mode began */
     uint32_t commutate_tick;       /* closed loop: when the next commutation is due */
     uint32_t valid_steps;          /* ramp: consecutive steps with a zero cross */
-    uint32_t last_zc_tick;
+    uint32_t last_zc_tick;         /* the tick of the last cross (desync timeout) */
     uint32_t blanking_periods;     /* of the present step */
     uint8_t trip;                  /* bemf_trip */
     float trip_value;
@@ -221,6 +244,7 @@ typedef struct {
     float phase_current_a[3];
     float vdc_v;
     uint8_t comparators;       /* bit x: terminal x above the virtual neutral */
+    float terminal_v[3];       /* the terminal voltages (V, any common scale) */
     uint8_t overcurrent_flag;  /* the plant's hardware comparator */
     uint8_t torque_mode;       /* closed loop: torque_ref_nm instead of the speed PI's */
     float speed_ref_rad_s;

@@ -49,8 +49,8 @@ typedef char fw_name_fits_hello[(sizeof fw_name - 1u <= HIL_NAME_MAX) ? 1 : -1];
  * a user sets it for their drive here, or sets the PI gains (24, 25). */
 #define BEMF_DESIGN_INERTIA_KGM2 2.0e-5f
 #define BEMF_SPEED_BANDWIDTH_HZ 10.0f
-#define BEMF_DEFAULT_TORQUE_LIMIT_NM 0.24f
-#define BEMF_DEFAULT_OVERCURRENT_A 20.0f
+#define BEMF_DEFAULT_TORQUE_LIMIT_NM 0.15f
+#define BEMF_DEFAULT_OVERCURRENT_A 15.0f
 #define BEMF_DEFAULT_ZC_TIMEOUT_S 0.02f
 
 /* Vendor parameters (ids 100-110, examples/bemf_sixstep/board.yaml) */
@@ -204,7 +204,9 @@ static void set_defaults(bemf_fw *f)
     f->blanking_fraction = 0.25f;
     f->current_bandwidth_hz = 500.0f;
     f->demag_current_a = 0.1f;
-    f->zc_lag_periods = 1.0f;
+    /* the comparators and ADCs see a period's average (half a period late)
+     * through this board's 10 us RC filter (0.2 of a 50 us period) */
+    f->zc_lag_periods = 0.7f;
     derive(f);
 }
 
@@ -515,6 +517,10 @@ static void on_sample_sensors(bemf_fw *f, const hil_sample_sensors *s)
     }
     in.vdc_v = ((float)s->adc_vdc - f->vdc_offset_counts) * f->vdc_v_per_count;
     in.comparators = s->bemf_comparators;
+    const uint16_t terminal[3] = {s->adc_va, s->adc_vb, s->adc_vc};
+    for (unsigned x = 0u; x < 3u; ++x) {
+        in.terminal_v[x] = (float)terminal[x] * f->terminal_v_per_count;
+    }
     in.overcurrent_flag = (s->status & HIL_STATUS_OVERCURRENT) != 0u;
     in.torque_mode = f->torque_mode;
     in.speed_ref_rad_s = f->speed_ref_rad_s;

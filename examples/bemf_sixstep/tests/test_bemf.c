@@ -63,52 +63,67 @@ static void zero_cross_waits_for_blanking_and_demagnetisation(void **state)
     (void)state;
     bemf_zc_detector zc;
     bemf_zc_arm(&zc, bemf_commutation(1), 100u);
-    uint32_t at = 0u;
+    bemf_instant at = {0u, 0.0f};
     /* blanking: the level after the cross (1) during ticks 100..102 is not looked at */
     for (uint32_t t = 100u; t < 103u; ++t) {
-        assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x02u, 0.0f, t, &at), 0);
+        assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x02u, 0.0f, 5.0f, t, &at), 0);
     }
     /* demagnetisation: the floating phase still carries current, its terminal
      * sits on a rail and reads 1: no cross */
-    assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x02u, -2.0f, 103u, &at), 0);
-    assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x02u, -0.5f, 104u, &at), 0);
+    assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x02u, -2.0f, 12.0f, 103u, &at), 0);
+    assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x02u, -0.5f, 12.0f, 104u, &at), 0);
     /* current out at 105: the comparator needs one more sample (a period's average) */
-    assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x00u, 0.0f, 105u, &at), 0);
-    assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x00u, 0.0f, 106u, &at), 0);
+    assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x02u, 0.0f, 3.0f, 105u, &at), 0);
+    assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x00u, 0.0f, -1.0f, 106u, &at), 0);
     /* other phases' bits do not matter */
-    assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x05u, 0.01f, 107u, &at), 0);
+    assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x05u, 0.01f, -0.8f, 107u, &at), 0);
     /* one sample at 1 then back to 0: a glitch, not confirmed */
-    assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x02u, 0.0f, 108u, &at), 0);
-    assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x00u, 0.0f, 109u, &at), 0);
-    /* the cross: 1 at 110 and 111, confirmed at 111, dated 110 */
-    assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x02u, 0.0f, 110u, &at), 0);
-    assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x07u, 0.0f, 111u, &at), 1);
-    assert_int_equal(at, 110u);
+    assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x02u, 0.0f, 0.1f, 108u, &at), 0);
+    assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x00u, 0.0f, -0.3f, 109u, &at), 0);
+    /* the cross: 1 at 110 and 111, confirmed at 111; between samples 109 (-0.3 V)
+     * and 110 (+0.1 V) the terminal crossed the neutral three quarters of the way */
+    assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x02u, 0.0f, 0.1f, 110u, &at), 0);
+    assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x07u, 0.0f, 0.5f, 111u, &at), 1);
+    assert_int_equal(at.tick, 109u);
+    assert_float_equal(at.frac, 0.75, 1e-6);
     /* once per step */
-    assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x02u, 0.0f, 112u, &at), 0);
+    assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x02u, 0.0f, 0.9f, 112u, &at), 0);
 }
 
-/* Step 2: a floats, falling: only 1 -> 0 is its cross; a bit stuck at 1 never gives one. */
+/* Step 2: a floats, falling: only 1 -> 0 is its cross; a bit stuck at 1 never gives one;
+ * a rotor already past its cross shows it on the first sample looked at. */
 static void zero_cross_direction_and_stuck_comparator(void **state)
 {
     (void)state;
     bemf_zc_detector zc;
-    uint32_t at = 0u;
+    bemf_instant at = {0u, 0.0f};
     bemf_zc_arm(&zc, bemf_commutation(2), 0u);
     for (uint32_t t = 0u; t < 200u; ++t) {
-        assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x01u, 0.0f, t, &at), 0);
+        assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x01u, 0.0f, -1.0f, t, &at), 0);
     }
     bemf_zc_arm(&zc, bemf_commutation(2), 200u);
     int found = 0;
     for (uint32_t t = 200u; t < 220u && !found; ++t) {
-        found = bemf_zc_feed(&zc_cfg, &zc, t < 210u ? 0x01u : 0x00u, 0.0f, t, &at);
+        found = bemf_zc_feed(&zc_cfg, &zc, t < 210u ? 0x01u : 0x00u, 0.0f, t < 210u ? 0.2f : -0.2f, t, &at);
     }
     assert_true(found);
-    assert_int_equal(at, 210u);
-    /* NaN current is treated as current flowing: never a cross */
+    assert_int_equal(at.tick, 209u);
+    assert_float_equal(at.frac, 0.5, 1e-6);
+    /* already past: 0 from the first sample looked at (tick 305: blanking 3, one quiet sample) */
     bemf_zc_arm(&zc, bemf_commutation(2), 300u);
-    for (uint32_t t = 300u; t < 320u; ++t) {
-        assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x00u, NAN, t, &at), 0);
+    found = 0;
+    uint32_t t = 300u;
+    for (; t < 320u && !found; ++t) {
+        found = bemf_zc_feed(&zc_cfg, &zc, 0x00u, 0.0f, -2.0f, t, &at);
+    }
+    assert_true(found);
+    assert_int_equal(t - 1u, 305u); /* confirmed on the second sample */
+    assert_int_equal(at.tick, 303u);
+    assert_float_equal(at.frac, 1.0, 0.0); /* dated at its first sample, 304 */
+    /* NaN current is treated as current flowing: never a cross */
+    bemf_zc_arm(&zc, bemf_commutation(2), 400u);
+    for (t = 400u; t < 420u; ++t) {
+        assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x00u, NAN, -1.0f, t, &at), 0);
     }
 }
 
@@ -116,20 +131,21 @@ static void timing_commutes_half_an_interval_after_the_cross(void **state)
 {
     (void)state;
     bemf_timing t;
-    bemf_timing_seed(&t, 20.0f, 1000u);
-    /* 17-tick intervals: due at cross + 8.5 - lag 1 = cross + 7.5 -> 8 (rounded) */
-    uint32_t due = bemf_timing_zero_cross(&t, 1017u, 1.0f, 1018u);
-    assert_int_equal(due, 1017u + 8u);
-    assert_int_equal(bemf_timing_last_interval(&t), 17u);
-    /* speed: one electrical turn over the six intervals (five seeded 20s, one 17) */
+    bemf_instant z0 = {1000u, 0.0f};
+    bemf_timing_seed(&t, 20.0f, z0);
+    /* cross at 1017.5: interval 17.5; due at 1017.5 + 8.75 - lag 0.7 = 1025.55 -> 1026 */
+    bemf_instant z1 = {1017u, 0.5f};
+    assert_int_equal(bemf_timing_zero_cross(&t, z1, 0.7f, 1018u), 1026u);
+    assert_float_equal(bemf_timing_last_interval(&t), 17.5, 1e-5);
+    /* speed: two 60-degree intervals (the seeded 20 and 17.5) are 120 electrical degrees */
     float w = bemf_timing_speed_rad_s(&t, 4u, 50e-6f);
-    assert_float_equal(w, 2.0 * M_PI / (4.0 * (5 * 20 + 17) * 50e-6), 1e-3);
-    for (uint32_t k = 2u; k <= 6u; ++k) {
-        bemf_timing_zero_cross(&t, 1000u + 17u * k, 1.0f, 1000u + 17u * k);
-    }
-    assert_float_equal(bemf_timing_speed_rad_s(&t, 4u, 50e-6f), 2.0 * M_PI / (4.0 * 6 * 17 * 50e-6), 1e-3);
+    assert_float_equal(w, (2.0 * M_PI / 3.0) / (4.0 * (20.0 + 17.5) * 50e-6), 1e-2);
+    bemf_instant z2 = {1035u, 0.0f};
+    bemf_timing_zero_cross(&t, z2, 0.7f, 1036u);
+    assert_float_equal(bemf_timing_speed_rad_s(&t, 4u, 50e-6f), (2.0 * M_PI / 3.0) / (4.0 * 35.0 * 50e-6), 1e-2);
     /* a cross found late: never due in the past */
-    assert_int_equal(bemf_timing_zero_cross(&t, 2000u, 1.0f, 2500u), 2500u);
+    bemf_instant z3 = {2000u, 0.0f};
+    assert_int_equal(bemf_timing_zero_cross(&t, z3, 0.7f, 2500u), 2500u);
 }
 
 /* The drive's configuration for the synthetic rotor: the shared BLDC. */
@@ -147,7 +163,7 @@ static bemf_config test_config(void)
     c.align_current_a = 3.0f;
     c.ramp_current_a = 3.0f;
     c.handover_zero_crosses = 6u;
-    c.zc_lag_periods = 1.0f;
+    c.zc_lag_periods = 0.5f; /* the synthetic comparator: a period's average, no filter */
     c.blanking_fraction = 0.25f;
     c.min_blanking_periods = 2u;
     c.ramp.align_periods = 100u;
@@ -180,8 +196,8 @@ static uint8_t comparators_at(double theta_e)
 /* A synthetic rotor at a constant 2000 rpm, in step with the drive (closed
  * loop from the start): every commutation falls 30 electrical degrees after
  * the floating phase's cross, i.e. on the step boundaries 60 s - 150 deg,
- * within the period's quantisation (12 deg at this speed... here 4.8 deg per
- * period), and the speed from the crosses is the rotor's. */
+ * within half a period (a period is 4.8 electrical deg at this speed), and the
+ * speed from the crosses is the rotor's. */
 static void closed_loop_commutes_30_deg_after_each_cross(void **state)
 {
     (void)state;
@@ -198,7 +214,8 @@ static void closed_loop_commutes_30_deg_after_each_cross(void **state)
     bemf_zc_arm(&d.zc, bemf_commutation(2u), 0u);
     d.blanking_periods = 2u;
     float interval = (float)((M_PI / 3.0) / (w_e * T));
-    bemf_timing_seed(&d.timing, interval, 0u);
+    bemf_instant z0 = {0u, 0.0f};
+    bemf_timing_seed(&d.timing, interval, z0);
     d.last_zc_tick = 0u;
     d.commutate_tick = 1000000u;
     bemf_inputs in;
@@ -211,6 +228,9 @@ static void closed_loop_commutes_30_deg_after_each_cross(void **state)
     for (uint32_t k = 0u; k < 4000u; ++k) {
         double th_sample = theta0 + w_e * T * ((double)k - 0.5);
         in.comparators = comparators_at(th_sample);
+        for (int x = 0; x < 3; ++x) {
+            in.terminal_v[x] = (float)emf(x, th_sample);
+        }
         bemf_output out = bemf_drive_step(&c, &d, &in);
         assert_int_equal(d.mode, BEMF_CLOSED);
         if (out.step != last_step) {
@@ -228,8 +248,9 @@ static void closed_loop_commutes_30_deg_after_each_cross(void **state)
     }
     /* 4000 periods at 2000 rpm x 4 pole pairs: 26.7 electrical turns, 160 steps */
     assert_true(commutations > 150);
-    /* one period is 4.8 deg: the commutation lands within a period of 30 deg after the cross */
-    assert_true(worst <= 4.8 + 0.5);
+    /* the crosses are interpolated (the EMF is linear about its zero): the
+     * commutation lands within half a period (2.4 deg) of 30 deg after the cross */
+    assert_true(worst <= 2.4 + 0.3);
     assert_float_equal(d.speed_rad_s, w_m, 0.02 * w_m);
 }
 
@@ -305,7 +326,8 @@ static void closed_loop_without_crosses_trips_after_the_timeout(void **state)
     d.mode = BEMF_CLOSED;
     d.step = 2u;
     bemf_zc_arm(&d.zc, bemf_commutation(2u), 0u);
-    bemf_timing_seed(&d.timing, 20.0f, 0u);
+    bemf_instant z0 = {0u, 0.0f};
+    bemf_timing_seed(&d.timing, 20.0f, z0);
     d.last_zc_tick = 0u;
     bemf_inputs in;
     memset(&in, 0, sizeof in);
@@ -376,6 +398,23 @@ static void current_pi_follows_its_design(void **state)
     assert_float_equal(bemf_torque_constant(4u, 0.006f), 0.048, 1e-6);
 }
 
+/* Commutating 1 (a -> c) to 2 (b -> c) with a's current still decaying: the
+ * torque is 2 E i_c, so the regulated current is c's, not the mean of b's and c's. */
+static void pair_current_is_the_shared_phase_through_a_commutation(void **state)
+{
+    (void)state;
+    const float steady[3] = {3.0f, 0.0f, -3.0f};
+    assert_float_equal(bemf_pair_current(1u, steady), 3.0, 1e-6);
+    const float commutating[3] = {2.0f, 1.0f, -3.0f};
+    assert_float_equal(bemf_pair_current(2u, commutating), 3.0, 1e-6);
+    /* 2 (b -> c) to 3 (b -> a): b is shared */
+    const float low_changing[3] = {-1.0f, 3.0f, -2.0f};
+    assert_float_equal(bemf_pair_current(3u, low_changing), 3.0, 1e-6);
+    /* braking: current out at `high`, in at `low` */
+    const float braking[3] = {-2.5f, 0.0f, 2.5f};
+    assert_float_equal(bemf_pair_current(1u, braking), -2.5, 1e-6);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -389,6 +428,7 @@ int main(void)
         cmocka_unit_test(closed_loop_without_crosses_trips_after_the_timeout),
         cmocka_unit_test(overcurrent_and_nan_trip),
         cmocka_unit_test(current_pi_follows_its_design),
+        cmocka_unit_test(pair_current_is_the_shared_phase_through_a_commutation),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
