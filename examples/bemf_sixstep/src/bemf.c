@@ -371,6 +371,17 @@ static void run_closed(const bemf_config *cfg, bemf_drive *d, const bemf_inputs 
         commutate(cfg, d, bemf_timing_last_interval(&d->timing));
     }
     d->speed_rad_s = bemf_timing_speed_rad_s(&d->timing, cfg->pole_pairs, dt);
+    /* A cross overdue (two intervals since the commutation and none): the rotor
+     * is not where the step assumes, and holding the step against a turning
+     * rotor shorts its back-EMF through the pair. Open the bridge and coast,
+     * still watching the floating phase (with every leg open its comparator
+     * still sees the back-EMF), until the cross comes or the timeout trips. */
+    uint32_t overdue = 2u * (uint32_t)(bemf_timing_last_interval(&d->timing) + 0.5f) + d->blanking_periods;
+    d->coasting = !d->zc.found && d->tick - d->zc.armed_tick > overdue;
+    if (d->coasting) {
+        d->duty = 0.0f;
+        return; /* the regulators hold their state */
+    }
     /* the drive runs forwards only, no slower than its hand-over speed */
     float speed_ref = fmaxf(in->speed_ref_rad_s, cfg->ramp.ramp_end_rad_s);
     float limit = cfg->speed_gains.torque_limit_nm;
@@ -423,7 +434,7 @@ bemf_output bemf_drive_step(const bemf_config *cfg, bemf_drive *d, const bemf_in
         d->tick++;
     }
     bemf_output out = {0u, 0.0f};
-    if (d->mode == BEMF_ALIGN || d->mode == BEMF_RAMP || d->mode == BEMF_CLOSED) {
+    if ((d->mode == BEMF_ALIGN || d->mode == BEMF_RAMP || d->mode == BEMF_CLOSED) && !d->coasting) {
         out.step = d->step;
         out.duty = d->duty;
     }

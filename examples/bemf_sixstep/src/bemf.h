@@ -225,6 +225,7 @@ typedef struct {
     uint32_t valid_steps;          /* ramp: consecutive steps with a zero cross */
     uint32_t last_zc_tick;         /* the tick of the last cross (desync timeout) */
     uint32_t blanking_periods;     /* of the present step */
+    uint8_t coasting;              /* closed loop: the cross is overdue, the bridge is open */
     uint8_t trip;                  /* bemf_trip */
     float trip_value;
     float speed_rad_s;             /* mechanical, from the zero crosses (ramp: its speed) */
@@ -252,7 +253,8 @@ typedef struct {
 } bemf_inputs;
 
 /* The bridge command of one period: `step`'s high leg at `duty`, its low leg at
- * duty 0, its floating leg open; step 0 opens the whole bridge. */
+ * duty 0, its floating leg open; step 0 opens the whole bridge (off, tripped,
+ * or coasting while a zero cross is overdue). */
 typedef struct {
     uint8_t step;
     float duty;

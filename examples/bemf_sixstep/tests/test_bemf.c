@@ -329,13 +329,17 @@ static void closed_loop_without_crosses_trips_after_the_timeout(void **state)
     bemf_instant z0 = {0u, 0.0f};
     bemf_timing_seed(&d.timing, 20.0f, z0);
     d.last_zc_tick = 0u;
+    d.blanking_periods = 2u;
     bemf_inputs in;
     memset(&in, 0, sizeof in);
     in.vdc_v = 24.0f;
     in.comparators = 0x01u; /* a (falling in step 2) stuck high */
     uint32_t k = 0u;
     while (d.mode != BEMF_TRIPPED && k < 10000u) {
-        bemf_drive_step(&c, &d, &in);
+        bemf_output out = bemf_drive_step(&c, &d, &in);
+        /* driving step 2 until two intervals (20 periods) plus the blanking
+         * (min 2) are over without a cross, then coasting with the bridge open */
+        assert_int_equal(out.step, k <= 2u * 20u + 2u ? 2u : 0u);
         k++;
     }
     assert_int_equal(d.trip, BEMF_TRIP_DESYNC);
