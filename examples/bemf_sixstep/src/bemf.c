@@ -69,14 +69,17 @@ int bemf_zc_feed(const bemf_zc_config *cfg, bemf_zc_detector *zc, uint8_t compar
     /* demagnetisation: the comparator sees a period's average through the
      * terminal filter, so the current must have been out for a whole period
      * (two samples) before the comparator means the back-EMF. NaN counts as
-     * current. */
+     * current. A floating phase that still conducts at demag_limit_periods is
+     * not demagnetising: its diode is held on by a rotor far ahead of the step
+     * (an open-loop start), and its rail is the level after the cross. */
     if (!(fabsf(floating_current_a) <= cfg->demag_current_a)) {
-        zc->quiet = 0u;
-        zc->run = 0u;
-        zc->before_seen = 0u;
-        return 0;
-    }
-    if (zc->quiet < 2u) {
+        if (tick - zc->armed_tick < cfg->demag_limit_periods) {
+            zc->quiet = 0u;
+            zc->run = 0u;
+            zc->before_seen = 0u;
+            return 0;
+        }
+    } else if (zc->quiet < 2u) {
         zc->quiet++;
         if (zc->quiet < 2u) {
             return 0;
@@ -259,6 +262,7 @@ static void commutate(const bemf_config *cfg, bemf_drive *d, float interval_peri
     bemf_zc_arm(&d->zc, bemf_commutation(d->step), d->tick);
     uint32_t blank = (uint32_t)(cfg->blanking_fraction * interval_periods);
     d->blanking_periods = blank > cfg->min_blanking_periods ? blank : cfg->min_blanking_periods;
+    d->demag_limit_periods = d->blanking_periods + 1u + (uint32_t)(0.25f * interval_periods);
 }
 
 static float duty_of(float voltage_v, float vdc_v)
@@ -325,6 +329,7 @@ static void run_ramp(const bemf_config *cfg, bemf_drive *d, const bemf_inputs *i
 {
     bemf_zc_config zc_cfg = cfg->zc;
     zc_cfg.blanking_periods = d->blanking_periods;
+    zc_cfg.demag_limit_periods = d->demag_limit_periods;
     bemf_instant zc;
     int at_end_speed = d->ramp.tick >= cfg->ramp.ramp_periods;
     if (bemf_zc_feed(&zc_cfg, &d->zc, in->comparators, in->phase_current_a[d->zc.floating],
@@ -357,6 +362,7 @@ static void run_closed(const bemf_config *cfg, bemf_drive *d, const bemf_inputs 
 {
     bemf_zc_config zc_cfg = cfg->zc;
     zc_cfg.blanking_periods = d->blanking_periods;
+    zc_cfg.demag_limit_periods = d->demag_limit_periods;
     bemf_instant zc;
     if (bemf_zc_feed(&zc_cfg, &d->zc, in->comparators, in->phase_current_a[d->zc.floating],
                      floating_diff(in, d->zc.floating), d->tick, &zc)) {

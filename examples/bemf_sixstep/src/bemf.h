@@ -49,7 +49,9 @@ uint8_t bemf_next_step(uint8_t step);
  * (demagnetisation); that clamp reads as the level *after* the zero cross.
  * So nothing is looked at until the blanking interval is over AND the floating
  * phase's current has been below the demagnetisation threshold for two
- * samples (the comparator sees a period's average); then the zero cross is the
+ * samples (the comparator sees a period's average), or it still flows at the
+ * demagnetisation limit (then it is a rotor ahead of the step holding the
+ * diode on, not demagnetisation); then the zero cross is the
  * first of `confirm_samples` consecutive samples at the level after the
  * crossing for this step's direction (as AM32 does: a rotor that is already
  * past its crossing shows it at once, which pulls the commutation forward and
@@ -60,6 +62,7 @@ uint8_t bemf_next_step(uint8_t step);
 typedef struct {
     uint32_t blanking_periods;   /* after a commutation: nothing is read */
     float demag_current_a;       /* the floating phase's |current| below which demagnetisation is over */
+    uint32_t demag_limit_periods; /* after a commutation: a current still flowing is no longer demagnetisation */
     uint32_t confirm_samples;    /* >= 1 */
 } bemf_zc_config;
 typedef struct {
@@ -225,6 +228,7 @@ typedef struct {
     uint32_t valid_steps;          /* ramp: consecutive steps with a zero cross */
     uint32_t last_zc_tick;         /* the tick of the last cross (desync timeout) */
     uint32_t blanking_periods;     /* of the present step */
+    uint32_t demag_limit_periods;  /* of the present step: blanking + a quarter interval */
     uint8_t coasting;              /* closed loop: the cross is overdue, the bridge is open */
     uint8_t trip;                  /* bemf_trip */
     float trip_value;

@@ -51,7 +51,8 @@ typedef char fw_name_fits_hello[(sizeof fw_name - 1u <= HIL_NAME_MAX) ? 1 : -1];
 #define BEMF_SPEED_BANDWIDTH_HZ 10.0f
 #define BEMF_DEFAULT_TORQUE_LIMIT_NM 0.15f
 #define BEMF_DEFAULT_OVERCURRENT_A 15.0f
-#define BEMF_DEFAULT_ZC_TIMEOUT_S 0.02f
+/* longer than the hand-over: handover_zero_crosses + 1 steps at the ramp's end speed (36.7 ms) */
+#define BEMF_DEFAULT_ZC_TIMEOUT_S 0.04f
 
 /* Vendor parameters (ids 100-110, examples/bemf_sixstep/board.yaml) */
 enum {
@@ -168,6 +169,7 @@ static void derive(bemf_fw *f)
     c->ramp.ramp_periods = periods_of(f->ramp_time_s, f->control_period_s);
     c->zc.blanking_periods = c->min_blanking_periods;
     c->zc.demag_current_a = f->demag_current_a;
+    c->zc.demag_limit_periods = c->min_blanking_periods + 1u;
     c->zc.confirm_samples = 2u;
     c->speed_gains.kp_nm_per_rad_s = f->speed_kp;
     c->speed_gains.ki_nm_per_rad = f->speed_ki;

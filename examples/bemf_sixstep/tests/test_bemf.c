@@ -55,7 +55,7 @@ static void steps_follow_the_back_emf(void **state)
     }
 }
 
-static const bemf_zc_config zc_cfg = {3u, 0.1f, 2u};
+static const bemf_zc_config zc_cfg = {3u, 0.1f, 20u, 2u};
 
 /* Step 1: b floats, rising (0 -> 1). */
 static void zero_cross_waits_for_blanking_and_demagnetisation(void **state)
@@ -120,11 +120,16 @@ static void zero_cross_direction_and_stuck_comparator(void **state)
     assert_int_equal(t - 1u, 305u); /* confirmed on the second sample */
     assert_int_equal(at.tick, 303u);
     assert_float_equal(at.frac, 1.0, 0.0); /* dated at its first sample, 304 */
-    /* NaN current is treated as current flowing: never a cross */
+    /* NaN current is treated as current flowing: no cross before the demagnetisation limit */
     bemf_zc_arm(&zc, bemf_commutation(2), 400u);
     for (t = 400u; t < 420u; ++t) {
         assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x00u, NAN, -1.0f, t, &at), 0);
     }
+    /* a floating phase still conducting at the limit (20 periods): a rotor
+     * ahead of the step, its diode's rail read as the level after the cross */
+    assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x00u, 1.0f, -1.0f, 420u, &at), 0);
+    assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x00u, 1.0f, -1.0f, 421u, &at), 1);
+    assert_int_equal(at.tick, 419u);
 }
 
 static void timing_commutes_half_an_interval_after_the_cross(void **state)
@@ -172,6 +177,7 @@ static bemf_config test_config(void)
     c.ramp.ramp_periods = 400u;
     c.zc.blanking_periods = 2u;
     c.zc.demag_current_a = 0.1f;
+    c.zc.demag_limit_periods = 20u;
     c.zc.confirm_samples = 1u;
     c.speed_gains = bemf_speed_pi_design(2e-5f, 10.0f, 0.24f);
     c.current_gains = bemf_current_pi_design(0.25f, 0.3e-3f, 500.0f);
