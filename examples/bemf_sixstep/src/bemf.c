@@ -35,29 +35,39 @@ void bemf_zc_arm(bemf_zc_detector *zc, bemf_step step, uint32_t tick)
     zc->armed_tick = tick;
     zc->run = 0u;
     zc->first_tick = tick;
-    zc->first_frac = 1.0f;
     zc->quiet = 0u;
-    zc->last_diff_v = 0.0f;
+    zc->before_v[0] = zc->before_v[1] = 0.0f;
+    zc->before_ok[0] = zc->before_ok[1] = 0u;
+    zc->after_v = 0.0f;
+    zc->after_ok = 0u;
 }
 
-/* Where between the previous sample (0) and this one (1) the floating
- * terminal crossed the neutral; the level after the cross may read before the
- * ADC difference turns (comparator offset, noise): clamped to [0, 1]. */
-static float cross_fraction(float before_v, float after_v, int rising)
+static float clamp01(float x)
 {
-    float b = rising ? before_v : -before_v;
-    float a = rising ? after_v : -after_v;
-    if (!(b < 0.0f)) {
-        return 0.0f;
+    return x > 1.0f ? 1.0f : (x > 0.0f ? x : 0.0f); /* NaN -> 0 */
+}
+
+/* Where in the period before the first sample after the cross (0: at the last
+ * sample before it, 1: at the first after) the terminal crossed the neutral.
+ * Voltages are rising-signed (negative before, positive after). `next` is the
+ * confirming sample after `after_v` (valid when next_ok). */
+static float cross_fraction(const bemf_zc_detector *zc, float next_v, int next_ok)
+{
+    float b0 = zc->before_v[0], b1 = zc->before_v[1], a0 = zc->after_v;
+    if (zc->before_ok[0] && zc->after_ok && b0 < 0.0f && a0 > 0.0f) {
+        return b0 / (b0 - a0); /* both sides clean: interpolate */
     }
-    if (!(a > 0.0f)) {
-        return 1.0f;
+    if (zc->before_ok[0] && zc->before_ok[1] && b0 < 0.0f && b0 > b1) {
+        return clamp01(-b0 / (b0 - b1)); /* the sample after is clamped: extrapolate forward */
     }
-    return b / (b - a);
+    if (zc->after_ok && next_ok && a0 > 0.0f && next_v > a0) {
+        return clamp01(1.0f - a0 / (next_v - a0)); /* the sample before is clamped: backward */
+    }
+    return 0.5f;
 }
 
 int bemf_zc_feed(const bemf_zc_config *cfg, bemf_zc_detector *zc, uint8_t comparators,
-                 float floating_current_a, float floating_diff_v, uint32_t tick, bemf_instant *at)
+                 float floating_current_a, bemf_terminal terminal, uint32_t tick, bemf_instant *at)
 {
     if (zc->found) {
         return 0;
@@ -77,6 +87,7 @@ int bemf_zc_feed(const bemf_zc_config *cfg, bemf_zc_detector *zc, uint8_t compar
             zc->quiet = 0u;
             zc->run = 0u;
             zc->before_seen = 0u;
+            zc->before_ok[0] = zc->before_ok[1] = 0u;
             return 0;
         }
     } else if (zc->quiet < 2u) {
@@ -87,18 +98,22 @@ int bemf_zc_feed(const bemf_zc_config *cfg, bemf_zc_detector *zc, uint8_t compar
     }
     unsigned bit = (comparators >> zc->floating) & 1u;
     unsigned after = zc->rising ? 1u : 0u;
-    float before_v = zc->last_diff_v;
-    int before_seen = zc->before_seen;
-    zc->last_diff_v = floating_diff_v;
+    float v = zc->rising ? terminal.diff_v : -terminal.diff_v;
+    uint8_t ok = terminal.clamped ? 0u : 1u;
     if (bit != after) {
+        /* before the cross; after a glitch the older sample is not adjacent */
+        zc->before_v[1] = zc->before_v[0];
+        zc->before_ok[1] = zc->run == 0u ? zc->before_ok[0] : 0u;
+        zc->before_v[0] = v;
+        zc->before_ok[0] = ok;
         zc->run = 0u;
         zc->before_seen = 1u;
         return 0;
     }
-    zc->before_seen = 0u;
     if (zc->run == 0u) {
         zc->first_tick = tick;
-        zc->first_frac = before_seen ? cross_fraction(before_v, floating_diff_v, zc->rising) : 1.0f;
+        zc->after_v = v;
+        zc->after_ok = ok;
     }
     zc->run++;
     if (zc->run < (cfg->confirm_samples > 0u ? cfg->confirm_samples : 1u)) {
@@ -106,7 +121,7 @@ int bemf_zc_feed(const bemf_zc_config *cfg, bemf_zc_detector *zc, uint8_t compar
     }
     zc->found = 1u;
     at->tick = zc->first_tick - 1u;
-    at->frac = zc->first_frac;
+    at->frac = zc->before_seen ? cross_fraction(zc, v, zc->run >= 2u && ok) : 1.0f;
     return 1;
 }
 
@@ -214,7 +229,16 @@ float bemf_current_pi_step(const bemf_current_pi_gains *g, bemf_current_pi *pi, 
                            float current_a, float line_emf_v, float vdc_v, float dt_s)
 {
     float e = current_ref_a - current_a;
-    float feed_forward = 2.0f * g->resistance_ohm * current_ref_a + line_emf_v;
+    /* the back-EMF only: the integrator supplies 2 R i, and its zero (ki / kp =
+     * R / L) then cancels the pair's pole, leaving i / i_ref = w_c / (s + w_c);
+     * feeding 2 R i_ref forward as well would leave that zero uncancelled and the
+     * current (the torque) overshooting its reference */
+    float feed_forward = line_emf_v;
+    if (pi->primed) {
+        pi->integral_v -= feed_forward - pi->feed_forward_v;
+    }
+    pi->feed_forward_v = feed_forward;
+    pi->primed = 1u;
     float candidate = pi->integral_v + g->ki_v_per_as * dt_s * e;
     float v = feed_forward + g->kp_v_per_a * e + candidate;
     if ((v > vdc_v && e > 0.0f) || (v < 0.0f && e < 0.0f)) {
@@ -315,14 +339,19 @@ static void hand_over(const bemf_config *cfg, bemf_drive *d, bemf_instant zc)
      * the ramp speed, and an integrator preloaded with the open loop's torque
      * would carry the first speed rise far past its reference. */
     d->speed_pi.integral_nm = 0.0f;
-    d->current_pi.integral_v = 0.0f;
+    memset(&d->current_pi, 0, sizeof d->current_pi);
 }
 
-/* The floating terminal's voltage less the virtual neutral (the mean of the three). */
-static float floating_diff(const bemf_inputs *in, uint8_t floating)
+/* The floating terminal less the virtual neutral (the mean of the three), and
+ * whether it sits on a rail (within 2 % of the link of DC- or DC+: a diode
+ * conducts, the voltage says nothing of the back-EMF). */
+static bemf_terminal floating_terminal(const bemf_inputs *in, uint8_t floating)
 {
     float neutral = (in->terminal_v[0] + in->terminal_v[1] + in->terminal_v[2]) * (1.0f / 3.0f);
-    return in->terminal_v[floating] - neutral;
+    float v = in->terminal_v[floating];
+    float margin = 0.02f * in->vdc_v;
+    bemf_terminal t = {v - neutral, (uint8_t)(!(v > margin) || !(v < in->vdc_v - margin))};
+    return t;
 }
 
 static void run_ramp(const bemf_config *cfg, bemf_drive *d, const bemf_inputs *in)
@@ -333,7 +362,7 @@ static void run_ramp(const bemf_config *cfg, bemf_drive *d, const bemf_inputs *i
     bemf_instant zc;
     int at_end_speed = d->ramp.tick >= cfg->ramp.ramp_periods;
     if (bemf_zc_feed(&zc_cfg, &d->zc, in->comparators, in->phase_current_a[d->zc.floating],
-                     floating_diff(in, d->zc.floating), d->tick, &zc)) {
+                     floating_terminal(in, d->zc.floating), d->tick, &zc)) {
         d->last_zc_tick = zc.tick;
         if (at_end_speed && ++d->valid_steps >= cfg->handover_zero_crosses) {
             hand_over(cfg, d, zc);
@@ -365,7 +394,7 @@ static void run_closed(const bemf_config *cfg, bemf_drive *d, const bemf_inputs 
     zc_cfg.demag_limit_periods = d->demag_limit_periods;
     bemf_instant zc;
     if (bemf_zc_feed(&zc_cfg, &d->zc, in->comparators, in->phase_current_a[d->zc.floating],
-                     floating_diff(in, d->zc.floating), d->tick, &zc)) {
+                     floating_terminal(in, d->zc.floating), d->tick, &zc)) {
         d->commutate_tick = bemf_timing_zero_cross(&d->timing, zc, cfg->zc_lag_periods, d->tick);
         d->last_zc_tick = zc.tick;
     }

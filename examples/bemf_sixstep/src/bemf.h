@@ -51,20 +51,33 @@ uint8_t bemf_next_step(uint8_t step);
  * phase's current has been below the demagnetisation threshold for two
  * samples (the comparator sees a period's average), or it still flows at the
  * demagnetisation limit (then it is a rotor ahead of the step holding the
- * diode on, not demagnetisation); then the zero cross is the
- * first of `confirm_samples` consecutive samples at the level after the
- * crossing for this step's direction (as AM32 does: a rotor that is already
- * past its crossing shows it at once, which pulls the commutation forward and
- * keeps the drive in step). Its time is interpolated between that sample and
- * the one before from the floating terminal's voltage to the virtual neutral
- * (the terminal ADCs), when the sample before was looked at and read the level
- * before the crossing; else it is the first sample's. */
+ * diode on, not demagnetisation); then the zero cross is the first of
+ * `confirm_samples` consecutive samples at the level after the crossing for
+ * this step's direction (as AM32 does: a rotor that is already past its
+ * crossing shows it at once, which pulls the commutation forward and keeps the
+ * drive in step).
+ *
+ * Its time within the period is found from the floating terminal's voltage to
+ * the virtual neutral (the terminal ADCs), linear about the crossing: between
+ * the samples either side of it; or, when one of them is clamped to a rail
+ * (a floating terminal whose back-EMF pulls it below DC- conducts through its
+ * diode during the PWM off-time), extrapolated from the two clean samples on
+ * the other side; else the middle of the period. A cross whose level showed on
+ * the first sample looked at is dated at that sample. */
 typedef struct {
     uint32_t blanking_periods;   /* after a commutation: nothing is read */
     float demag_current_a;       /* the floating phase's |current| below which demagnetisation is over */
     uint32_t demag_limit_periods; /* after a commutation: a current still flowing is no longer demagnetisation */
-    uint32_t confirm_samples;    /* >= 1 */
+    uint32_t confirm_samples;    /* >= 1; with 2 or more the sample after the cross helps date it */
 } bemf_zc_config;
+
+/* One sample of the floating terminal: its voltage less the virtual neutral
+ * (V, any scale: only ratios are used) and whether it sits on a rail. */
+typedef struct {
+    float diff_v;
+    uint8_t clamped;
+} bemf_terminal;
+
 typedef struct {
     uint8_t floating;
     uint8_t rising;
@@ -73,9 +86,11 @@ typedef struct {
     uint32_t armed_tick;    /* the commutation's tick */
     uint32_t run;           /* consecutive samples at the level after the crossing */
     uint32_t first_tick;    /* the first of them */
-    float first_frac;       /* the cross at first_tick - 1 + first_frac */
     uint32_t quiet;         /* consecutive samples with the floating current out (demagnetised) */
-    float last_diff_v;      /* the previous sample's floating terminal minus the virtual neutral */
+    float before_v[2];      /* the last two samples before the cross ([0] the newer), rising-signed */
+    uint8_t before_ok[2];   /* each looked at, adjacent, not clamped */
+    float after_v;          /* the first sample after the cross, rising-signed */
+    uint8_t after_ok;
 } bemf_zc_detector;
 
 /* When a zero cross happened: `tick` + `frac` periods, frac in [0, 1]. */
@@ -86,12 +101,11 @@ typedef struct {
 
 /* Arms the detector for a new step, commutated at `tick`. */
 void bemf_zc_arm(bemf_zc_detector *zc, bemf_step step, uint32_t tick);
-/* Feeds one sample: the comparator bits, the floating phase's current and its
- * terminal voltage less the virtual neutral (V; any scale, only its sign and
- * ratio are used). Returns 1 on the sample that confirms the zero cross, with
- * *at its interpolated time; 0 otherwise (and after the cross is found). */
+/* Feeds one sample: the comparator bits, the floating phase's current and
+ * terminal. Returns 1 on the sample that confirms the zero cross, with *at its
+ * time; 0 otherwise (and after the cross is found). */
 int bemf_zc_feed(const bemf_zc_config *cfg, bemf_zc_detector *zc, uint8_t comparators,
-                 float floating_current_a, float floating_diff_v, uint32_t tick, bemf_instant *at);
+                 float floating_current_a, bemf_terminal terminal, uint32_t tick, bemf_instant *at);
 
 /* ---- zero-cross timing: commutation 30 deg after the cross, speed ---------- */
 
@@ -153,9 +167,14 @@ bemf_speed_pi_gains bemf_speed_pi_design(float inertia_kgm2, float bandwidth_hz,
 float bemf_speed_pi_step(const bemf_speed_pi_gains *g, bemf_speed_pi *pi, float error_rad_s, float dt_s);
 
 /* Pair-current PI with back-EMF feed-forward: the pair voltage
- * v = 2 R i_ref + e_line + kp (i_ref - i) + integral, in [0, vdc]. The pair is
- * 2 R, 2 L in series with the line back-EMF, so kp = 2 L w_c and ki = 2 R w_c
- * put the loop's pole at -w_c. Conditional integration at the rails. */
+ * v = e_line + kp (i_ref - i) + integral, in [0, vdc]. The pair is 2 R, 2 L in
+ * series with the line back-EMF, so kp = 2 L w_c and ki = 2 R w_c cancel its
+ * pole and leave i / i_ref = w_c / (s + w_c): no overshoot. Conditional
+ * integration at the rails. The back-EMF estimate moves in steps (the speed is
+ * updated at each zero cross, late while the rotor accelerates) and the
+ * integrator has meanwhile taken up what it missed: a step of the feed-forward
+ * is taken off the integrator, so the voltage does not jump and the current
+ * does not overshoot; the feed-forward sets the voltage where the loop starts. */
 typedef struct {
     float resistance_ohm;     /* per phase */
     float kp_v_per_a;
@@ -163,6 +182,8 @@ typedef struct {
 } bemf_current_pi_gains;
 typedef struct {
     float integral_v;
+    float feed_forward_v;  /* the back-EMF fed forward last period */
+    uint8_t primed;        /* feed_forward_v is valid */
 } bemf_current_pi;
 bemf_current_pi_gains bemf_current_pi_design(float resistance_ohm, float inductance_h, float bandwidth_hz);
 /* Returns the pair voltage, V, in [0, vdc_v]. */

@@ -57,6 +57,18 @@ static void steps_follow_the_back_emf(void **state)
 
 static const bemf_zc_config zc_cfg = {3u, 0.1f, 20u, 2u};
 
+/* A floating terminal `v` volts from the neutral, clean or clamped to a rail. */
+static bemf_terminal term(float v)
+{
+    bemf_terminal t = {v, 0u};
+    return t;
+}
+static bemf_terminal railed(float v)
+{
+    bemf_terminal t = {v, 1u};
+    return t;
+}
+
 /* Step 1: b floats, rising (0 -> 1). */
 static void zero_cross_waits_for_blanking_and_demagnetisation(void **state)
 {
@@ -66,28 +78,28 @@ static void zero_cross_waits_for_blanking_and_demagnetisation(void **state)
     bemf_instant at = {0u, 0.0f};
     /* blanking: the level after the cross (1) during ticks 100..102 is not looked at */
     for (uint32_t t = 100u; t < 103u; ++t) {
-        assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x02u, 0.0f, 5.0f, t, &at), 0);
+        assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x02u, 0.0f, term(5.0f), t, &at), 0);
     }
     /* demagnetisation: the floating phase still carries current, its terminal
      * sits on a rail and reads 1: no cross */
-    assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x02u, -2.0f, 12.0f, 103u, &at), 0);
-    assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x02u, -0.5f, 12.0f, 104u, &at), 0);
+    assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x02u, -2.0f, term(12.0f), 103u, &at), 0);
+    assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x02u, -0.5f, term(12.0f), 104u, &at), 0);
     /* current out at 105: the comparator needs one more sample (a period's average) */
-    assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x02u, 0.0f, 3.0f, 105u, &at), 0);
-    assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x00u, 0.0f, -1.0f, 106u, &at), 0);
+    assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x02u, 0.0f, term(3.0f), 105u, &at), 0);
+    assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x00u, 0.0f, term(-1.0f), 106u, &at), 0);
     /* other phases' bits do not matter */
-    assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x05u, 0.01f, -0.8f, 107u, &at), 0);
+    assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x05u, 0.01f, term(-0.8f), 107u, &at), 0);
     /* one sample at 1 then back to 0: a glitch, not confirmed */
-    assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x02u, 0.0f, 0.1f, 108u, &at), 0);
-    assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x00u, 0.0f, -0.3f, 109u, &at), 0);
+    assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x02u, 0.0f, term(0.1f), 108u, &at), 0);
+    assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x00u, 0.0f, term(-0.3f), 109u, &at), 0);
     /* the cross: 1 at 110 and 111, confirmed at 111; between samples 109 (-0.3 V)
      * and 110 (+0.1 V) the terminal crossed the neutral three quarters of the way */
-    assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x02u, 0.0f, 0.1f, 110u, &at), 0);
-    assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x07u, 0.0f, 0.5f, 111u, &at), 1);
+    assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x02u, 0.0f, term(0.1f), 110u, &at), 0);
+    assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x07u, 0.0f, term(0.5f), 111u, &at), 1);
     assert_int_equal(at.tick, 109u);
     assert_float_equal(at.frac, 0.75, 1e-6);
     /* once per step */
-    assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x02u, 0.0f, 0.9f, 112u, &at), 0);
+    assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x02u, 0.0f, term(0.9f), 112u, &at), 0);
 }
 
 /* Step 2: a floats, falling: only 1 -> 0 is its cross; a bit stuck at 1 never gives one;
@@ -99,12 +111,12 @@ static void zero_cross_direction_and_stuck_comparator(void **state)
     bemf_instant at = {0u, 0.0f};
     bemf_zc_arm(&zc, bemf_commutation(2), 0u);
     for (uint32_t t = 0u; t < 200u; ++t) {
-        assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x01u, 0.0f, -1.0f, t, &at), 0);
+        assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x01u, 0.0f, term(-1.0f), t, &at), 0);
     }
     bemf_zc_arm(&zc, bemf_commutation(2), 200u);
     int found = 0;
     for (uint32_t t = 200u; t < 220u && !found; ++t) {
-        found = bemf_zc_feed(&zc_cfg, &zc, t < 210u ? 0x01u : 0x00u, 0.0f, t < 210u ? 0.2f : -0.2f, t, &at);
+        found = bemf_zc_feed(&zc_cfg, &zc, t < 210u ? 0x01u : 0x00u, 0.0f, term(t < 210u ? 0.2f : -0.2f), t, &at);
     }
     assert_true(found);
     assert_int_equal(at.tick, 209u);
@@ -114,21 +126,44 @@ static void zero_cross_direction_and_stuck_comparator(void **state)
     found = 0;
     uint32_t t = 300u;
     for (; t < 320u && !found; ++t) {
-        found = bemf_zc_feed(&zc_cfg, &zc, 0x00u, 0.0f, -2.0f, t, &at);
+        found = bemf_zc_feed(&zc_cfg, &zc, 0x00u, 0.0f, term(-2.0f), t, &at);
     }
     assert_true(found);
     assert_int_equal(t - 1u, 305u); /* confirmed on the second sample */
     assert_int_equal(at.tick, 303u);
     assert_float_equal(at.frac, 1.0, 0.0); /* dated at its first sample, 304 */
+    /* a clamped sample after the cross (the floating terminal on DC- through its
+     * diode): dated by extrapolating the two clean samples before it; falling, so
+     * +0.5 then +0.2 V: 0.2 / 0.3 of the period after the second */
+    bemf_zc_arm(&zc, bemf_commutation(2), 340u);
+    found = 0;
+    for (t = 340u; t < 360u && !found; ++t) {
+        bemf_terminal v = t < 348u ? term(1.0f) : t == 348u ? term(0.5f) : t == 349u ? term(0.2f) : railed(-3.0f);
+        found = bemf_zc_feed(&zc_cfg, &zc, t < 350u ? 0x01u : 0x00u, 0.0f, v, t, &at);
+    }
+    assert_true(found);
+    assert_int_equal(at.tick, 349u);
+    assert_float_equal(at.frac, 0.2 / 0.3, 1e-5);
+    /* rising (step 1, b) with the sample before clamped: backwards from the two
+     * after it, +0.1 then +0.5 V: a quarter period before the first */
+    bemf_zc_arm(&zc, bemf_commutation(1), 360u);
+    found = 0;
+    for (t = 360u; t < 380u && !found; ++t) {
+        bemf_terminal v = t < 369u ? term(-1.0f) : t == 369u ? railed(-3.0f) : t == 370u ? term(0.1f) : term(0.5f);
+        found = bemf_zc_feed(&zc_cfg, &zc, t < 370u ? 0x00u : 0x02u, 0.0f, v, t, &at);
+    }
+    assert_true(found);
+    assert_int_equal(at.tick, 369u);
+    assert_float_equal(at.frac, 0.75, 1e-5);
     /* NaN current is treated as current flowing: no cross before the demagnetisation limit */
     bemf_zc_arm(&zc, bemf_commutation(2), 400u);
     for (t = 400u; t < 420u; ++t) {
-        assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x00u, NAN, -1.0f, t, &at), 0);
+        assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x00u, NAN, term(-1.0f), t, &at), 0);
     }
     /* a floating phase still conducting at the limit (20 periods): a rotor
      * ahead of the step, its diode's rail read as the level after the cross */
-    assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x00u, 1.0f, -1.0f, 420u, &at), 0);
-    assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x00u, 1.0f, -1.0f, 421u, &at), 1);
+    assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x00u, 1.0f, term(-1.0f), 420u, &at), 0);
+    assert_int_equal(bemf_zc_feed(&zc_cfg, &zc, 0x00u, 1.0f, term(-1.0f), 421u, &at), 1);
     assert_int_equal(at.tick, 419u);
 }
 
@@ -235,7 +270,7 @@ static void closed_loop_commutes_30_deg_after_each_cross(void **state)
         double th_sample = theta0 + w_e * T * ((double)k - 0.5);
         in.comparators = comparators_at(th_sample);
         for (int x = 0; x < 3; ++x) {
-            in.terminal_v[x] = (float)emf(x, th_sample);
+            in.terminal_v[x] = 12.0f + (float)emf(x, th_sample); /* about mid-link: no rail */
         }
         bemf_output out = bemf_drive_step(&c, &d, &in);
         assert_int_equal(d.mode, BEMF_CLOSED);
@@ -380,20 +415,40 @@ static void overcurrent_and_nan_trip(void **state)
     assert_int_equal(d.trip, BEMF_TRIP_OVERCURRENT);
 }
 
-/* The current PI on the pair model 2 L di/dt = v - 2 R i - e settles at the
- * reference with the pole at -w_c: after 1/f_c ... 3 time constants within 5 %. */
+/* The current PI on the pair model 2 L di/dt = v - 2 R i - e: a step of the
+ * reference follows w_c / (s + w_c) (no overshoot; 63 % after one time
+ * constant), and an error in the back-EMF estimate is integrated away. */
 static void current_pi_follows_its_design(void **state)
 {
     (void)state;
     const float R = 0.25f, L = 0.3e-3f, dt = 50e-6f, e = 10.0f;
+    const double wc = 2.0 * M_PI * 500.0;
     bemf_current_pi_gains g = bemf_current_pi_design(R, L, 500.0f);
-    assert_float_equal(g.kp_v_per_a, 2.0 * L * 2.0 * M_PI * 500.0, 1e-4);
-    bemf_current_pi pi = {0.0f};
-    double i = 0.0;
+    assert_float_equal(g.kp_v_per_a, 2.0 * L * wc, 1e-4);
+    bemf_current_pi pi = {0.0f, 0.0f, 0u};
+    double i = 0.0, peak = 0.0;
+    for (int k = 0; k < 400; ++k) {
+        float v = bemf_current_pi_step(&g, &pi, 4.0f, (float)i, e, 24.0f, dt);
+        assert_true(v >= 0.0f && v <= 24.0f);
+        for (int j = 0; j < 50; ++j) {
+            i += (v - 2.0 * R * i - e) / (2.0 * L) * (dt / 50.0);
+        }
+        peak = fmax(peak, i);
+        if (k == (int)(1.0 / (wc * dt))) { /* one time constant (6.4 periods): 1 - 1/e */
+            assert_float_equal(i, 4.0 * (1.0 - exp(-(k + 1) * dt * wc)), 0.4);
+        }
+    }
+    assert_true(peak <= 4.0 * 1.01);
+    assert_float_equal(i, 4.0, 0.01);
+    /* the back-EMF estimate steps by 1 V (a speed update): the voltage does not jump */
+    bemf_current_pi held = pi;
+    float v0 = bemf_current_pi_step(&g, &held, 4.0f, (float)i, e, 24.0f, dt);
+    held = pi;
+    float v1 = bemf_current_pi_step(&g, &held, 4.0f, (float)i, e + 1.0f, 24.0f, dt);
+    assert_float_equal(v1, v0, 1e-4);
     /* the back-EMF estimate is 1 V off: the integrator removes it */
     for (int k = 0; k < 400; ++k) {
         float v = bemf_current_pi_step(&g, &pi, 4.0f, (float)i, e - 1.0f, 24.0f, dt);
-        assert_true(v >= 0.0f && v <= 24.0f);
         for (int j = 0; j < 50; ++j) {
             i += (v - 2.0 * R * i - e) / (2.0 * L) * (dt / 50.0);
         }
