@@ -1,6 +1,17 @@
 """The paper plans' limits on the hardware-like profile, derived (issue 15): what the errors
 no compensation in the stub removes do to its flux observer, at each plan's operating point.
-Prints the values written into test_plans/0[1-6]*.yaml's descriptions and `profile_limits`.
+
+Everything it models is read from the files it models, at the first call: the plant
+(plant_rt/profiles/paper-hardware.yaml), what the stub's board file (firmware_stub/board.yaml)
+tells the board on that profile, and each plan's operating point (its speed, load and DC
+link, the plan's own `constants` in test_plans/). `load(profile_path)` reads another profile.
+
+Plans 01, 02 and 06 carry the first-order form of this model as formulas of those values
+(their `constants`: the DC-link reading's error e_v and the drift compensation's pull along
+q); `formulas_against_model()` puts each formula's value beside this module's fuller
+solution (Newton on the rotor-frame error, the drop term, the i_d coupling), which needs an
+iteration the formula language does not have. Plan 05's hardware limits (the second model,
+below) are regression bounds: that model was written after a run had failed.
 
 The errors (plant_rt/profiles/paper-hardware.yaml against what the stub's board file,
 firmware_stub/board.yaml, tells the board on that profile; read from both files at import):
@@ -51,6 +62,9 @@ import math
 
 
 
+PROFILE_PATH = None     # None: plant_rt/profiles/paper-hardware.yaml
+
+
 def _modelled() -> dict:
     """The values this model is made of, read from what it models: the hardware-like profile
     (the plant) and what the stub's board file tells the board on it (SPEC 8.1's default for
@@ -61,7 +75,7 @@ def _modelled() -> dict:
 
     from pathlib import Path
 
-    hw = load_bench_profile(Path(profiles_init).parent / "paper-hardware.yaml")
+    hw = load_bench_profile(PROFILE_PATH or Path(profiles_init).parent / "paper-hardware.yaml")
     told = {s.name: s.value for s in board_parameters(hw, default_board("stub"), "paper-hardware")}
 
     def board(name: str) -> float:
@@ -69,6 +83,8 @@ def _modelled() -> dict:
 
     vdc = hw.sensors.dc_voltage
     return {
+        "vdc_v": hw.dc_link.source_voltage_v, "flux_ref_wb": board("flux_ref_wb"),
+        "torque_limit_nm": board("torque_limit_nm"), "inertia_kgm2": hw.motor.inertia_kgm2,
         "r_warm_ohm": hw.motor.resistance_ohm, "r_board_ohm": board("stator_resistance_ohm"),
         "current_gain": hw.sensors.current.gain, "vdc_gain": vdc.gain,
         # the board reads (count - its offset) x scale: the plant's offset it does not know
@@ -84,15 +100,46 @@ _NAMES = {"R_WARM_OHM": "r_warm_ohm", "R_BOARD_OHM": "r_board_ohm", "CURRENT_GAI
           "VDC_GAIN": "vdc_gain", "VDC_OFFSET_V": "vdc_offset_v", "L_H": "l_h",
           "PSI_F_WB": "psi_f_wb", "DAMPING": "damping", "DRIFT_W0": "drift_w0",
           "POLE_PAIRS": "pole_pairs", "DEVICE_DROP_V": "device_drop_v",
-          "RS_ID_VDC_V": "rs_id_vdc_v"}
+          "RS_ID_VDC_V": "rs_id_vdc_v", "VDC_V": "vdc_v", "FLUX_REF_WB": "flux_ref_wb",
+          "TORQUE_LIMIT_NM": "torque_limit_nm", "INERTIA_KGM2": "inertia_kgm2"}
 
 
 def _load() -> None:
-    """Fills the module's constants (R_WARM_OHM, ... RS_ID_VDC_V) from the files, once: at the
+    """Fills the module's constants (R_WARM_OHM, ... INERTIA_KGM2) from the files, once: at the
     first call, not at import (an installed copy without the repository's files imports)."""
     if "R_WARM_OHM" not in globals():
         values = _modelled()
         globals().update({name: values[key] for name, key in _NAMES.items()})
+
+
+def load(profile_path=None) -> None:
+    """Reads the modelled values again, from `profile_path` (a bench profile) or the
+    hardware-like profile."""
+    global PROFILE_PATH
+    PROFILE_PATH = profile_path
+    globals().pop("R_WARM_OHM", None)
+    _load()
+
+
+def plan_point(plan: str) -> dict:
+    """A paper plan's operating point, from its `constants` (test_plans/<plan>), evaluated
+    on the profile this module models: {constant: value in its unit}."""
+    from pathlib import Path
+
+    from hil.plans.format import bind_plan, load_plan
+    from hil.session.board_params import default_board, load_bench_profile
+    from plant_rt.profiles import __file__ as profiles_init
+
+    _load()
+    path = Path(__file__).resolve().parents[1] / "test_plans" / plan
+    profile_path = PROFILE_PATH or Path(profiles_init).parent / "paper-hardware.yaml"
+    bound = bind_plan(load_plan(path), load_bench_profile(profile_path),
+                      default_board("stub"), "paper-hardware")
+    return {name: c.value for name, c in bound.constants.items()}
+
+
+def _rpm(point: dict, name: str = "speed") -> float:
+    return point[name]
 
 
 RS_ID_SIGMA_OHM = 0.5e-3        # the identification's spread, 1 sigma (docs/stub.md)
@@ -212,19 +259,21 @@ def plan05_rs_id() -> dict:
     when this was written: arctan 2.64 deg RMS, 0.78 with R exact, 1.48 with the DC-link
     reading exact); they test the model, the limits do not come from them."""
     _load()
+    p05 = plan_point("05_rotor_position.yaml")
+    rpm, load_nm = p05["speed"], p05["load_torque"]
     r_id = r_identified()
-    point = operating_point_2(1500, 70.0, 0.099, load_nm=1.0, r_board_ohm=r_id)
-    spread = [operating_point_2(1500, 70.0, 0.099, load_nm=1.0, r_board_ohm=r_id + k * RS_ID_SIGMA_OHM)
+    point = operating_point_2(rpm, VDC_V, FLUX_REF_WB, load_nm=load_nm, r_board_ohm=r_id)
+    spread = [operating_point_2(rpm, VDC_V, FLUX_REF_WB, load_nm=load_nm, r_board_ohm=r_id + k * RS_ID_SIGMA_OHM)
               ["rotor_position_error_deg"] for k in (-3, 3)]
     bias = max(abs(point["rotor_position_error_deg"]), *(abs(v) for v in spread))
     ideal = {"arctan_rms": 0.5, "arctan_peak": 1.0, "ekf_rms": 2.0, "ekf_peak": 4.0}
     limits = {k: math.ceil((v + bias) * 10 - 1e-9) / 10 for k, v in ideal.items()}
     cold = {
-        "all errors (measured 2.64 deg RMS)": operating_point_2(1500, 70.0, 0.099, load_nm=1.0,
+        "all errors (measured 2.64 deg RMS)": operating_point_2(rpm, VDC_V, FLUX_REF_WB, load_nm=load_nm,
                                                                 r_board_ohm=R_BOARD_OHM),
-        "R exact (measured 0.78)": operating_point_2(1500, 70.0, 0.099, load_nm=1.0, r_board_ohm=R_BOARD_OHM,
-                                                     r_plant_ohm=R_BOARD_OHM),
-        "DC-link reading exact (measured 1.48)": operating_point_2(1500, 70.0, 0.099, load_nm=1.0,
+        "R exact (measured 0.78)": operating_point_2(rpm, VDC_V, FLUX_REF_WB, load_nm=load_nm,
+                                                     r_board_ohm=R_BOARD_OHM, r_plant_ohm=R_BOARD_OHM),
+        "DC-link reading exact (measured 1.48)": operating_point_2(rpm, VDC_V, FLUX_REF_WB, load_nm=load_nm,
                                                                    r_board_ohm=R_BOARD_OHM, vdc_gain=1.0,
                                                                    vdc_offset_v=0.0),
     }
@@ -234,8 +283,8 @@ def plan05_rs_id() -> dict:
             "second_model_with_cold_r": {k: v["rotor_position_error_deg"] for k, v in cold.items()}}
 
 
-def q_axis_pull(rpm: float = 1500, vdc_v: float = 70.0, flux_ref_wb: float = 0.099,
-                load_nm: float = 1.0) -> dict:
+def q_axis_pull(rpm: float | None = None, vdc_v: float | None = None,
+                flux_ref_wb: float | None = None, load_nm: float | None = None) -> dict:
     """The drift compensation's pull on the scaled rotor flux, turned along q (the finding of
     plan 05's first hardware run; docs/fidelity.md and docs/stub.md quote it), linearised, at
     plan 05's point: with the board's cold R (the first run, i_d of the second derivation with
@@ -244,8 +293,14 @@ def q_axis_pull(rpm: float = 1500, vdc_v: float = 70.0, flux_ref_wb: float = 0.0
     2 w0 (e_v psi_f + (e_v - (g - 1)) L i_d) / w_e; beside them the second derivation's y
     solved without linearising (which also holds the drop term and the resistance error's own
     part with the cold R), and the angle the linearised pull turns the rotor flux by,
-    atan(pull / psi_f)."""
+    atan(pull / psi_f). Defaults: plan 05's point, the profile's link, the board's flux
+    reference."""
     _load()
+    p05 = plan_point("05_rotor_position.yaml")
+    rpm = p05["speed"] if rpm is None else rpm
+    load_nm = p05["load_torque"] if load_nm is None else load_nm
+    vdc_v = VDC_V if vdc_v is None else vdc_v
+    flux_ref_wb = FLUX_REF_WB if flux_ref_wb is None else flux_ref_wb
     w_e = rpm / 60 * 2 * math.pi * POLE_PAIRS
     out = {}
     for name, r_board in (("cold_r_first_run", R_BOARD_OHM), ("r_identified", r_identified())):
@@ -265,41 +320,83 @@ def q_axis_pull(rpm: float = 1500, vdc_v: float = 70.0, flux_ref_wb: float = 0.0
     return out
 
 
-def ramp_drift(rpm_a: float, rpm_b: float, torque_limit_nm: float = 2.0) -> dict:
+def ramp_drift(rpm_a: float, rpm_b: float, torque_limit_nm: float | None = None) -> dict:
     """On the torque-limited ramp: how fast the estimated flux angle drifts against the rotor,
     d(theta_hat - theta_r)/dw, and the speed-estimate bias and extra lag it gives."""
     _load()
-    a = operating_point(rpm_a, 70.0, 0.099, torque_estimate_nm=torque_limit_nm)
-    b = operating_point(rpm_b, 70.0, 0.099, torque_estimate_nm=torque_limit_nm)
+    torque_limit_nm = TORQUE_LIMIT_NM if torque_limit_nm is None else torque_limit_nm
+    a = operating_point(rpm_a, VDC_V, FLUX_REF_WB, torque_estimate_nm=torque_limit_nm)
+    b = operating_point(rpm_b, VDC_V, FLUX_REF_WB, torque_estimate_nm=torque_limit_nm)
     dw = (rpm_b - rpm_a) / 60 * 2 * math.pi
     slope = (b["flux_angle_hat_rad"] - a["flux_angle_hat_rad"]) / dw
-    accel = (a["true_torque_nm"] - DAMPING * rpm_a / 60 * 2 * math.pi) / 8.0e-4
+    accel = (a["true_torque_nm"] - DAMPING * rpm_a / 60 * 2 * math.pi) / INERTIA_KGM2
     bias = slope * accel
     return {"dtheta_dw_s": slope, "accel_rad_s2": accel, "speed_bias_rad_s": bias,
             "speed_bias_rpm": bias * 60 / (2 * math.pi), "extra_lag_ms": -bias / accel * 1e3}
 
 
+def formulas_against_model() -> dict:
+    """Plans 01, 02 and 06's hardware-profile formulas (their constants, first order: the
+    scale e_v and the pull 2 w0 e_v psi_f / w_e, with the identified R) beside the second
+    model solved without linearising, with the same identified R, at each plan's point."""
+    _load()
+    r_id = r_identified()
+    p01, p02, p06 = (plan_point(p) for p in ("01_speed_step_sensored.yaml",
+                                             "02_steady_state_3000rpm.yaml", "06_load_step_dc_sag.yaml"))
+    m02 = operating_point_2(p02["speed"], VDC_V, FLUX_REF_WB, load_nm=p02["load_torque"], r_board_ohm=r_id)
+    m06 = operating_point_2(p06["speed"], p06["sag_voltage"], p06["flux_ref"], load_nm=p06["load_torque"],
+                            r_board_ohm=r_id)
+    return {
+        "plan01_true_torque_at_the_limit_nm": {
+            "formula": p01["torque_at_limit"],
+            "second_model": operating_point_2_torque_at_limit(p01["speed_start"], r_id)},
+        "plan02_true_flux_mwb": {"formula": p02["flux_true"] * 1e3, "second_model": m02["true_flux_mwb"]},
+        "plan06_true_flux_mwb": {"formula": p06["flux_true"] * 1e3, "second_model": m06["true_flux_mwb"]},
+    }
+
+
+def operating_point_2_torque_at_limit(rpm: float, r_board_ohm: float) -> float:
+    """The true torque when the board holds its estimate at its torque limit, the second
+    model's estimate (bisection on the load that gives that estimate)."""
+    _load()
+    lo, hi = 0.0, 2.0 * TORQUE_LIMIT_NM
+    for _ in range(60):
+        mid = (lo + hi) / 2
+        point = operating_point_2(rpm, VDC_V, FLUX_REF_WB, load_nm=mid, r_board_ohm=r_board_ohm)
+        lo, hi = (lo, mid) if point["torque_estimate_nm"] > TORQUE_LIMIT_NM else (mid, hi)
+    return lo + DAMPING * rpm / 60 * 2 * math.pi / POLE_PAIRS
+
+
 def run(quick: bool = False) -> dict:
     _load()
+    p01, p02, p05, p06 = (plan_point(p) for p in (
+        "01_speed_step_sensored.yaml", "02_steady_state_3000rpm.yaml", "05_rotor_position.yaml",
+        "06_load_step_dc_sag.yaml"))
     return {
-        "plan01_torque_limit_at_1500rpm": operating_point(1500, 70.0, 0.099, torque_estimate_nm=2.0),
-        "plan02_3000rpm_1Nm": operating_point(3000, 70.0, 0.099, load_nm=1.0),
+        # The first model, with the board's cold R (the stub identifies R since 0254632: these
+        # are what the earlier literal hardware limits of plans 01, 02, 06 were derived from).
+        "plan01_torque_limit_at_1500rpm": operating_point(p01["speed_start"], VDC_V, FLUX_REF_WB,
+                                                          torque_estimate_nm=TORQUE_LIMIT_NM),
+        "plan02_3000rpm_1Nm": operating_point(p02["speed"], VDC_V, FLUX_REF_WB, load_nm=p02["load_torque"]),
         "plan03_ramp_1700_1900rpm": ramp_drift(1700, 1900),
-        "plan05_1500rpm_1Nm": operating_point(1500, 70.0, 0.099, load_nm=1.0),
-        "plan06_sag_3000rpm_0.5Nm_56V": operating_point(3000, 56.0, 0.0928, load_nm=0.5),
+        "plan05_1500rpm_1Nm": operating_point(p05["speed"], VDC_V, FLUX_REF_WB, load_nm=p05["load_torque"]),
+        "plan06_sag_3000rpm_0.5Nm_56V": operating_point(p06["speed"], p06["sag_voltage"], p06["flux_ref"],
+                                                        load_nm=p06["load_torque"]),
         "plan05_second_derivation_rs_id": plan05_rs_id(),
         # The q-axis error the drift compensation's pull leaves (docs/fidelity.md, docs/stub.md).
         "plan05_q_axis_pull": q_axis_pull(),
-        # Plans 02 and 06's hardware limits were derived (above) for the board's cold R; since
-        # the stub identifies R at start-up on paper-hardware (0254632) they run with R_id.
-        # What the second model says of them then, printed AFTER they had run with it (their
-        # limits are not re-derived from this; test_plans/02's description has the finding).
+        # The second model with the identified R at plans 02 and 06's points (docs/fidelity.md
+        # quotes it: printed after those plans had run with the identified R).
         "after_the_fact_second_model_rs_id": {
-            "plan02_3000rpm_1Nm": operating_point_2(3000, 70.0, 0.099, load_nm=1.0,
-                                                    r_board_ohm=r_identified()),
-            "plan06_sag_3000rpm_0.5Nm_56V": operating_point_2(3000, 56.0, 0.0928, load_nm=0.5,
+            "plan02_3000rpm_1Nm": operating_point_2(p02["speed"], VDC_V, FLUX_REF_WB,
+                                                    load_nm=p02["load_torque"], r_board_ohm=r_identified()),
+            "plan06_sag_3000rpm_0.5Nm_56V": operating_point_2(p06["speed"], p06["sag_voltage"], p06["flux_ref"],
+                                                              load_nm=p06["load_torque"],
                                                               r_board_ohm=r_identified()),
         },
+        # Plans 01, 02 and 06's hardware limits are now formulas (first order, identified R);
+        # the fuller model's values beside them.
+        "plan_formulas_against_second_model": formulas_against_model(),
     }
 
 

@@ -27,6 +27,8 @@ continuous but not smooth, so an RK4 step across it would lose its order (1e-4 o
 against the switched-circuit reference before; the step now ends there, nothing changes state).
 This is what makes the safe state at 3000 rpm decay to zero and then stay there while the line
 back-EMF is below the 70 V link.
+With a trapezoidal back-EMF (plant_rt.motor) the trapezoid's corners, where d e/dt jumps, end
+a step in the same way as a knee (the rhs is then _rhs_shaped).
 
 The load torque within an interval is the linear piece set by set_load_segment (the plant cuts
 its intervals at the profile's knots), plus the speed term.
@@ -86,6 +88,9 @@ class Network:
         # per phase: +1 while |i| > i_knee at the last accepted state, -1 inside the knee
         # (which way the knee event looks); only with a device drop
         self._knee_side = [0, 0, 0]
+        # trapezoidal machine: the sign of each corner family's wave at the last accepted state
+        self._corner_side = [1.0, 1.0]
+        self._theta_e = 0.0
         # load profile over the interval: value v0 at t_a, slope (set_load_segment)
         self._tl = (0.0, 0.0, 0.0)
         #: the C kernel (plant_rt.ckernel.KERNEL), None for this Python implementation
@@ -338,7 +343,8 @@ class Network:
         x . (u_ab + 2/3 x V_x - R i_ab - e_ab) = 0 with |x| = 1 gives V_x."""
         m = self.motor
         r, ild = m.r, m.ild
-        ma, mb, da, db = m.magnet_flux_ab(m.p * th)
+        self._theta_e = m.p * th
+        ma, mb, da, db = m.magnet_flux_ab(self._theta_e)
         we = m.p * w
         dc = self.dc
         if self.all_zero:
@@ -451,13 +457,25 @@ class Network:
             for x in range(3):
                 if (kinds[x] == H or kinds[x] == L) and side[x]:
                     out.append((side[x] * (knee - abs(cur[x])), ("k", x)))
+        if self.motor.trapezoidal:
+            # the trapezoid's corners (theta_e = +-ramp mod 60 deg), where d e/dt jumps: a
+            # step ends there as at a knee, so that RK4 keeps its order
+            for k, side in enumerate(self._corner_side):
+                out.append((-side * self._corner_wave(k), ("k", -1)))
         return out
+
+    def _corner_wave(self, k: int) -> float:
+        """sin(3 (theta_e -+ ramp)) at the last rhs() state: zero at every corner of family k."""
+        ramp = self.motor.ramp_rad
+        return sin(3.0 * (self._theta_e - ramp if k == 0 else self._theta_e + ramp))
 
     def _note_knee_sides(self) -> None:
         """Which side of the knee each driven current is on at the last rhs() state."""
         if self.ud:
             knee, cur = self.knee, self.cur
             self._knee_side = [1 if abs(cur[x]) > knee else -1 for x in range(3)]
+        if self.motor.trapezoidal:
+            self._corner_side = [1.0 if self._corner_wave(k) > 0.0 else -1.0 for k in (0, 1)]
 
     # ----------------------------------------------------------- integration
     def _rk4(self, t: float, y: list[float], h: float, k1: tuple) -> tuple[list[float], tuple]:

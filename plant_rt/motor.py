@@ -206,8 +206,8 @@ class MotorModel:
         """advance() for the trapezoidal machine: n steps of length h, each of them cut where
         the rotor passes a corner of the trapezoid (corner_times), every piece one classic RK4
         step on derivatives(). At a corner d e/dt jumps, and an RK4 step across it would lose
-        its order (measured: 4e-6 of the peak current against solve_ivp in 20 ms of six-step
-        at 50 us, against 2e-8 with the cut)."""
+        its order (measured against solve_ivp, 50 ms of six-step at 50 us: 9e-6 of the peak
+        current without the cut, 7e-9 with it, near the sinusoid's 2e-9)."""
         t = 0.0
         for _ in range(n):
             a = 0.0

@@ -5,6 +5,8 @@ Per period k (T = control_period_s):
     s = plant.sample()        # what the board's converters read at t_k = k T
     plant.step(gates=...)     # integrate [t_k, t_k+1] with the board's answer
 
+(plant.sensor_frame() instead of sample() for a board with a sensor set: plant_rt.sensor_set.)
+
 The answer takes effect computation_delay_s after t_k; before that the previous command holds.
 The period is cut into intervals of constant switch state (computation delay, PWM edges, dead
 time, load-profile knots) and each interval is integrated exactly as it is, never averaged:
@@ -140,18 +142,20 @@ class Plant:
         self._timeline.kernel = self._ckernel
         self._bind_readout(self._ckernel)
         self._rebuild()
-        # Sensor sets (sensor_frame) and the thermal model: nothing runs per period until a
-        # frame is asked for or the profile enables the thermal model (_sensor_period).
+        # Sensor sets: computed by sensor_frame() only, so a plant never asked for a frame
+        # does nothing more per period. The thermal model, when the profile enables it, runs
+        # after every period (_thermal_period).
         self._sensor_set = SensorSet(profile.sensors, seed, self._T)
         self._sensor_set.attach(self.sensors)
         self._frame: SensorFrame | None = None
         self._frame_sample: SensorSample | None = None
-        self._emf_start: tuple[float, float, float] | None = None
+        self._terminal_k: int | None = None       # the period the terminal filters are at
+        self._emf_then: tuple[float, float, float] = (0.0, 0.0, 0.0)   # back-EMFs then
         self._thermal = ThermalModel(profile.thermal, profile.motor.resistance_ohm, self._T)
         self._thermal_on = profile.thermal.enabled
         if self._thermal_on:
             self._apply_winding_resistance()
-            self.add_period_hook(self._sensor_period, "after")
+            self.add_period_hook(self._thermal_period, "after")
 
     @property
     def c_kernel(self) -> bool:
@@ -722,19 +726,30 @@ class Plant:
 
     def sensor_frame(self) -> SensorFrame:
         """Every sensor of the sensor sets at t_k (the same object if called again in the same
-        period), with sample()'s period, status, adc_vdc and encoder. The first call starts the
-        terminal filters, settled at the present terminal voltages, and from then on advances
-        them once per period (_sensor_period)."""
+        period), with sample()'s period, status, adc_vdc and encoder.
+
+        The terminal filters start at the first call, settled at the terminal voltages of that
+        instant; each later call advances them by the periods since the one before, with the
+        terminal voltages averaged over the period just ended (under the command in force,
+        the back-EMF as the mean of its values then and now): exact when a frame is asked for
+        every period, as a session does; after a gap the last period's average stands for the
+        whole gap."""
         sample = self.sample()
         if self._frame_sample is sample:
             return self._frame
         sset = self._sensor_set
         currents = self._phase_currents()
-        if self._emf_start is None:
-            self._emf_start = self._back_emf()
-            sset.terminal.start(self._terminal_voltages(currents, self._emf_start))
-            if self._sensor_period not in self._hooks["after"]:
-                self.add_period_hook(self._sensor_period, "after")
+        k = self.period
+        emf_now = self._back_emf()
+        if self._terminal_k is None:
+            sset.terminal.start(self._terminal_voltages(currents, emf_now))
+        elif k > self._terminal_k:
+            then = self._emf_then
+            emf = (0.5 * (then[0] + emf_now[0]), 0.5 * (then[1] + emf_now[1]),
+                   0.5 * (then[2] + emf_now[2]))
+            sset.terminal.advance(self._terminal_voltages(currents, emf), k - self._terminal_k)
+        self._terminal_k = k
+        self._emf_then = emf_now
         conducts = None
         if sset.phase_currents.low_side:
             tl = self._timeline
@@ -752,25 +767,19 @@ class Plant:
         it the winding stays at thermal.initial_degc."""
         return self._thermal.temperature_degc
 
-    def _sensor_period(self, k: int) -> None:
-        """After every period (an 'after' hook, installed by the thermal model or the first
-        sensor_frame()): the thermal model, then the terminal filters, advance by the period
-        just ended."""
-        if self._thermal_on:
+    def _thermal_period(self, k: int) -> None:
+        """After every period (an 'after' hook, installed when the profile enables the thermal
+        model): the winding temperature advances with the copper loss at the period's end held
+        over the period, and the motor's resistance follows."""
+        if self._zero_current:
+            ia = ib = 0.0
+        else:
             ia, ib, _, _ = self.motor.currents(self._pa, self._pb, self._th)
-            if self._zero_current:
-                ia = ib = 0.0
-            elif self._open_phase is not None:
+            if self._open_phase is not None:
                 ia, ib = _cut_phase(self._open_phase, ia, ib)[3:]
-            thermal = self._thermal
-            thermal.advance(thermal.copper_loss_w(ia, ib))
-            self._apply_winding_resistance()
-        if self._emf_start is not None:
-            start, end = self._emf_start, self._back_emf()
-            # e averaged over the period as the mean of its ends (second order in omega_e T)
-            emf = (0.5 * (start[0] + end[0]), 0.5 * (start[1] + end[1]), 0.5 * (start[2] + end[2]))
-            self._sensor_set.terminal.advance(self._terminal_voltages(self._phase_currents(), emf))
-            self._emf_start = end
+        thermal = self._thermal
+        thermal.advance(thermal.copper_loss_w(ia, ib))
+        self._apply_winding_resistance()
 
     def _apply_winding_resistance(self) -> None:
         """The motor's resistance to the thermal model's R(T), when it moved by more than 1e-6

@@ -17,11 +17,15 @@ from math import cos, sin
 from typing import NamedTuple
 
 from plant_rt.circuit import ZERO_CURRENT_A
-from plant_rt.inverter import H, L, LEG_BITS, Command, leg_states
+from plant_rt.inverter import ALL_LEGS, H, L, LEG_BITS, Command, leg_states
 from plant_rt.sensor_params import HallParams, ResolverParams, TemperatureSensorParams, TerminalParams
-from plant_rt.sensors import AdcChannel, CurrentSensorParams, GaussianNoise, SensorParams, SensorSample
+from plant_rt.sensors import (
+    AdcChannel, CurrentSensorParams, GaussianNoise, SensorParams, SensorSample, _code,
+)
 
 TWO_PI_3 = 2.0 * math.pi / 3.0
+_new_frame = tuple.__new__      # a NamedTuple from a tuple without its __new__'s argument parsing
+_LEG_STATES = tuple(leg_states(g) for g in range(64))
 
 #: Noise stream ids of the sensor-set channels (plant_rt.sensors uses 1 to 4 and 8).
 STREAM_PHASE_CURRENTS = (16, 17, 18)
@@ -51,13 +55,38 @@ class SensorFrame(NamedTuple):
     adc_temperature: int
 
 
-def _stuck_bit(level) -> int | None:
-    """A stuck fault's level: None (not stuck), or 0 / 1."""
+def _stuck_level(level) -> int | None:
+    """A stuck fault's level checked: None (not stuck), or 0 / 1."""
     if level is None:
         return None
-    if level not in (0, 1):
+    if isinstance(level, float) or level not in (0, 1):
         raise ValueError(f"a stuck level is None, 0 or 1, got {level!r}")
     return int(level)
+
+
+class StuckLevels(list):
+    """Per phase (a, b, c) None or the level 0 / 1 a sensor is stuck at; a fault sets an
+    element (levels[x] = 1, levels[:] = [...]) and anything else is refused there."""
+
+    def __init__(self):
+        super().__init__((None, None, None))
+
+    def __setitem__(self, index, value):
+        if isinstance(index, slice):
+            value = [_stuck_level(v) for v in value]
+            if len(range(*index.indices(3))) != len(value):
+                raise ValueError("stuck levels are exactly three, one per phase")
+        else:
+            value = _stuck_level(value)
+        super().__setitem__(index, value)
+
+    def __delitem__(self, index):
+        raise TypeError("stuck levels are exactly three, one per phase")
+
+    def _fixed_length(self, *args, **kwargs):
+        raise TypeError("stuck levels are exactly three, one per phase")
+
+    append = extend = insert = pop = remove = clear = __iadd__ = __imul__ = _fixed_length
 
 
 class HallSensors:
@@ -73,13 +102,21 @@ class HallSensors:
     or 1 (the sensor's output held at that level; its state keeps following the magnet).
     """
 
-    __slots__ = ("placement_error_rad", "hysteresis_rad", "stuck", "state")
+    __slots__ = ("placement_error_rad", "hysteresis_rad", "_stuck", "state")
 
     def __init__(self, params: HallParams):
         self.placement_error_rad = [math.radians(e) for e in params.placement_error_deg]
         self.hysteresis_rad = math.radians(params.hysteresis_deg)
-        self.stuck: list[int | None] = [None, None, None]
+        self._stuck = StuckLevels()
         self.state: list[int] | None = None
+
+    @property
+    def stuck(self) -> StuckLevels:
+        return self._stuck
+
+    @stuck.setter
+    def stuck(self, levels) -> None:
+        self._stuck[:] = list(levels)
 
     def read(self, theta_e_rad: float) -> int:
         """The Hall word (bit0 A, bit1 B, bit2 C) at electrical angle theta_e_rad."""
@@ -97,7 +134,7 @@ class HallSensors:
                 state[x] = 1
             elif c < -threshold:
                 state[x] = 0
-            level = _stuck_bit(self.stuck[x])
+            level = self._stuck[x]
             word |= (state[x] if level is None else level) << x
         return word
 
@@ -109,9 +146,13 @@ def driven_leg_voltages(command: Command, vdc: float, force_on: int = 0, force_o
     None for a leg with both switches off (floated, or a shoot-through the driver trips).
     force_on / force_off: stuck switches (gate bits), applied to a gate word."""
     if command.duty is None:
-        word = (command.gates | force_on) & ~force_off
-        return tuple(vdc if s == H else 0.0 if s == L else None for s in leg_states(word))
+        a, b, c = _LEG_STATES[(command.gates | force_on) & ~force_off]
+        return (vdc if a == H else 0.0 if a == L else None,
+                vdc if b == H else 0.0 if b == L else None,
+                vdc if c == H else 0.0 if c == L else None)
     duty, legs = command.duty, command.legs
+    if legs == ALL_LEGS:
+        return duty[0] * vdc, duty[1] * vdc, duty[2] * vdc
     return tuple(duty[x] * vdc if legs >> x & 1 else None for x in range(3))
 
 
@@ -127,7 +168,7 @@ def low_side_conducts(command: Command, currents: tuple[float, float, float],
         for x in range(3):
             if command.legs >> x & 1:
                 word |= LEG_BITS[x][0] if command.duty[x] >= 1.0 else LEG_BITS[x][1]
-    states = leg_states((word | force_on) & ~force_off)
+    states = _LEG_STATES[(word | force_on) & ~force_off]
     return tuple(states[x] == L or (states[x] != H and currents[x] > ZERO_CURRENT_A)
                  for x in range(3))
 
@@ -180,26 +221,36 @@ class TerminalVoltages:
 
     State ``filtered_v`` (V, per phase; None until start()): the first-order RC filter,
     advanced once per period with the terminal voltage v averaged over the period just ended:
-    y += (1 - exp(-T/tau)) (v - y), tau = filter_time_constant_s (0: y = v). So a step of v at
-    t_0 reads 1 - exp(-k T / tau) of it k periods later.
+    y += (1 - exp(-T/tau)) (v - y), tau = filter_time_constant_s (0: y = v); n periods of the
+    same v at once: y += (1 - exp(-n T/tau)) (v - y). So a step of v at t_0 reads
+    1 - exp(-k T / tau) of it k periods later.
     ADC: count = round(y / v_per_count + noise), saturated to 0 .. 2^bits - 1.
     Comparator x (bit x): y_x > (y_a + y_b + y_c) / 3 + comparator_offset_v[x] (the virtual
     neutral of three equal resistors; offsets in V at the terminal scale).
     Faults: ``comparator_stuck[x]`` None, 0 or 1.
     """
 
-    __slots__ = ("channels", "comparator_offset_v", "comparator_stuck", "filtered_v",
-                 "_filter_gain")
+    __slots__ = ("channels", "comparator_offset_v", "_comparator_stuck", "filtered_v",
+                 "_filter_gain", "_filter_decay")
 
     def __init__(self, params: TerminalParams, seed: int, period_s: float):
         self.channels = tuple(
             AdcChannel(params.v_per_count, 0.0, params.bits, 1.0, params.noise_rms_counts,
                        GaussianNoise(seed, stream)) for stream in STREAM_TERMINAL_VOLTAGES)
         self.comparator_offset_v = list(params.comparator_offset_v)
-        self.comparator_stuck: list[int | None] = [None, None, None]
+        self._comparator_stuck = StuckLevels()
         self.filtered_v: list[float] | None = None
         tau = params.filter_time_constant_s
         self._filter_gain = 1.0 if tau == 0.0 else -math.expm1(-period_s / tau)
+        self._filter_decay = 0.0 if tau == 0.0 else -period_s / tau     # log(1 - gain)
+
+    @property
+    def comparator_stuck(self) -> StuckLevels:
+        return self._comparator_stuck
+
+    @comparator_stuck.setter
+    def comparator_stuck(self, levels) -> None:
+        self._comparator_stuck[:] = list(levels)
 
     @property
     def filter_gain(self) -> float:
@@ -210,9 +261,11 @@ class TerminalVoltages:
         """The filters settled at v (V): the terminals have held it forever."""
         self.filtered_v = [v[0], v[1], v[2]]
 
-    def advance(self, v: tuple[float, float, float]) -> None:
-        """One period with the average terminal voltages v (V)."""
+    def advance(self, v: tuple[float, float, float], periods: int = 1) -> None:
+        """`periods` periods (>= 1) with the average terminal voltages v (V)."""
         g = self._filter_gain
+        if periods != 1 and g != 1.0:
+            g = -math.expm1(periods * self._filter_decay)
         y = self.filtered_v
         for x in range(3):
             y[x] += g * (v[x] - y[x])
@@ -223,12 +276,12 @@ class TerminalVoltages:
         neutral = (y[0] + y[1] + y[2]) / 3.0
         bits = 0
         for x in range(3):
-            level = _stuck_bit(self.comparator_stuck[x])
+            level = self._comparator_stuck[x]
             if level is None:
                 level = 1 if y[x] > neutral + self.comparator_offset_v[x] else 0
             bits |= level << x
         ch = self.channels
-        return ch[0].convert(y[0]), ch[1].convert(y[1]), ch[2].convert(y[2]), bits
+        return _code(ch[0], y[0]), _code(ch[1], y[1]), _code(ch[2], y[2]), bits
 
 
 class PhaseCurrents:
@@ -256,8 +309,8 @@ class PhaseCurrents:
         low_side_conducts."""
         ch = self.channels
         if conducts is None:
-            return ch[0].convert(currents[0]), ch[1].convert(currents[1]), ch[2].convert(currents[2])
-        return tuple(ch[x].convert(currents[x] if conducts[x] else 0.0) for x in range(3))
+            return _code(ch[0], currents[0]), _code(ch[1], currents[1]), _code(ch[2], currents[2])
+        return tuple(_code(ch[x], currents[x] if conducts[x] else 0.0) for x in range(3))
 
 
 class Resolver:
@@ -288,8 +341,8 @@ class Resolver:
         th = self.pole_pairs * theta_m_rad
         a = self.amplitude_counts
         half = 0.5 * self.amplitude_imbalance
-        return (self.sin_channel.convert(a * (1.0 + half) * sin(th)),
-                self.cos_channel.convert(a * (1.0 - half) * cos(th - self.quadrature_error_rad)))
+        return (_code(self.sin_channel, a * (1.0 + half) * sin(th)),
+                _code(self.cos_channel, a * (1.0 - half) * cos(th - self.quadrature_error_rad)))
 
 
 class TemperatureChannel:
@@ -303,7 +356,7 @@ class TemperatureChannel:
                                   params.noise_rms_counts, GaussianNoise(seed, STREAM_TEMPERATURE))
 
     def read(self, winding_degc: float) -> int:
-        return self.channel.convert(winding_degc)
+        return _code(self.channel, winding_degc)
 
 
 class SensorSet:
@@ -330,6 +383,7 @@ class SensorSet:
         ia, ib, ic = self.phase_currents.read(currents, conducts)
         va, vb, vc, comparators = self.terminal.read()
         rs, rc = self.resolver.read(theta_m_rad)
-        return SensorFrame(sample.period, sample.status, ia, ib, ic, sample.adc_vdc,
-                           sample.encoder, self.hall.read(theta_e_rad), va, vb, vc, comparators,
-                           rs, rc, self.temperature.read(winding_degc))
+        return _new_frame(SensorFrame, (sample.period, sample.status, ia, ib, ic, sample.adc_vdc,
+                                        sample.encoder, self.hall.read(theta_e_rad), va, vb, vc,
+                                        comparators, rs, rc,
+                                        self.temperature.read(winding_degc)))

@@ -81,6 +81,8 @@ SENSOR_FIELDS = (
 )
 _SENSOR_FIELD_NAMES = tuple(name for _, names, _, _ in SENSOR_FIELDS for name in names)
 SAMPLE_SENSORS_STATUS_MAX = 0x0F  # status bits 4-7 reserved
+_HALL_INDEX = _SENSOR_FIELD_NAMES.index("hall")
+_COMPARATORS_INDEX = _SENSOR_FIELD_NAMES.index("bemf_comparators")
 
 
 def sample_sensors_size(sensor_set: int) -> int:
@@ -331,7 +333,11 @@ def _dec_sample_sensors(buf, off: int, n: int):
     values = [0] * len(_SENSOR_FIELD_NAMES)
     for i, v in zip(indices, st.unpack_from(buf, off + SAMPLE_SENSORS_FIXED_SIZE)):
         values[i] = v
-    return SampleSensors(period, sensor_set, status, *values)
+    # reserved bits are ignored on receipt (SPEC 6.13): dropped here, so that every decoded
+    # message encodes again
+    values[_HALL_INDEX] &= 0x07
+    values[_COMPARATORS_INDEX] &= 0x07
+    return SampleSensors(period, sensor_set, status & SAMPLE_SENSORS_STATUS_MAX, *values)
 
 
 def _generic_decoder(st: struct.Struct, cls):

@@ -48,6 +48,22 @@ def test_no_shipped_profile_pushes_anything_but_the_required_parameters_to_a_spe
         assert pushed == list(REQUIRED_PARAMS)
 
 
+def test_a_board_file_may_take_the_sensor_set_parameters(tmp_path):
+    """SPEC 8's parameters 8 and 14-18 are standard and optional: listed, set, never pushed unasked."""
+    path = _write(tmp_path, "name: b\ncapabilities: [DUTY_LEGS, SENSOR_SET]\nparameters:\n  standard: "
+                            "[sensor_set, terminal_v_per_count, resolver_pole_pairs, resolver_offset_counts,"
+                            " temperature_degc_per_count, temperature_offset_counts]\n"
+                            "settings:\n  terminal_v_per_count: 0.0146484375\n  resolver_pole_pairs: 2\n")
+    board = load_board(path)
+    assert [board.param(n).id for n in ("sensor_set", "terminal_v_per_count", "resolver_pole_pairs",
+                                        "resolver_offset_counts", "temperature_degc_per_count",
+                                        "temperature_offset_counts")] == [8, 14, 15, 16, 17, 18]
+    assert board.param("sensor_set").read_only and board.param("terminal_v_per_count").default == 100 / 4096
+    assert {s.name: s.value for s in board.settings_for(None)} == {
+        "terminal_v_per_count": 0.0146484375, "resolver_pole_pairs": 2}
+    assert not set(REQUIRED_PARAMS) & {"sensor_set", "terminal_v_per_count", "resolver_pole_pairs"}
+
+
 @pytest.mark.parametrize("text, line, key, needle", [
     ("name: b\nparameters:\n  standard: [torque_limt_nm]\n", 3, "parameters.standard[0]",
      "did you mean 'torque_limit_nm'"),
@@ -68,6 +84,10 @@ def test_no_shipped_profile_pushes_anything_but_the_required_parameters_to_a_spe
     ("name: b\nprofile_settings:\n  paper:\n    magic_x: 1\n", 4,
      "profile_settings.paper.magic_x", "unknown board parameter 'magic_x'"),
     ("name: b\ncapabilities: [GATES, PWM]\n", 2, "capabilities[1]", "expected one of"),
+    ("name: b\nparameters:\n  standard: [resolver_pole_pairs]\nsettings:\n  resolver_pole_pairs: 0\n", 5,
+     "settings.resolver_pole_pairs", "below its minimum 1"),
+    ("name: b\nparameters:\n  standard: [sensor_set]\nsettings:\n  sensor_set: 3\n", 5,
+     "settings.sensor_set", "read-only"),
     ("parameters: {}\n", 1, None, "missing required key 'name'"),
 ])
 def test_bad_board_files_name_file_line_and_key(tmp_path, text, line, key, needle):

@@ -157,14 +157,19 @@ INIT_MOTORS = {
 }
 
 
+FOC01 = PLANS / "foc" / "01_speed_step.yaml"
+
+
+@pytest.mark.parametrize("plan", [PLAN01, FOC01], ids=["01", "foc01"])
 @pytest.mark.parametrize("motor", sorted(INIT_MOTORS))
-def test_plan01_passes_on_a_hil_init_motor(tmp_path, motor):
-    """The paper's plan 01 file, unchanged, on a `hil init` motor's profile and stub board file:
-    its limits and stimuli are evaluated for that motor, and the stub passes them."""
+def test_speed_step_plan_passes_on_a_hil_init_motor(tmp_path, motor, plan):
+    """The paper's plan 01 file and its FOC counterpart, unchanged, on a `hil init` motor's
+    profile and stub board file: their limits (the overshoot's e^-2 T_max / (Kp dw) among
+    them) and stimuli are evaluated for that motor, and the stub passes them."""
     project = tmp_path / motor
     assert hil_main(["init", str(project), "--name", motor, *INIT_MOTORS[motor]]) == 0
     out = tmp_path / "out"
-    code = hil_main(["run", str(PLAN01), "--profile", str(project / "profile.yaml"),
+    code = hil_main(["run", str(plan), "--profile", str(project / "profile.yaml"),
                      "--board", str(project / "boards" / "stub.yaml"), "--out", str(out),
                      "--no-progress"])
     [path] = out.glob("**/result.json")
@@ -198,71 +203,12 @@ def test_a_sweep_run_sees_its_sampled_profile_in_its_limits(tmp_path):
 
 # ------------------------------------------------------------------ every acceptance limit
 # Acceptance limits of test_plans/ still written as numbers (plan file, check, profile of a
-# `profile_limits` entry or None for `limits`): their derivations are in each plan's
-# description but not yet formulas. This list may only shrink: a limit converted to a formula
-# (or relabelled role: regression with a note) must leave it, and no new literal acceptance
-# limit may join it. Limits that state an identity (low == high in "1": a state or fault
-# code, a switch pattern) are definitions, not tolerances, and are not listed.
-LITERAL_ACCEPTANCE_LIMITS = {
-    ("01_speed_step_sensored.yaml", "overshoot", None),
-    ("01_speed_step_sensored.yaml", "torque at the limit while accelerating", 'paper-hardware'),
-    ("02_steady_state_3000rpm.yaml", "flux magnitude at its reference", 'paper-hardware'),
-    ("02_steady_state_3000rpm.yaml", "torque ripple RMS", None),
-    ("02_steady_state_3000rpm.yaml", "phase current RMS", None),
-    ("02_steady_state_3000rpm.yaml", "phase current THD", None),
-    ("03_speed_estimation.yaml", "filtered estimate noise", None),
-    ("03_speed_estimation.yaml", "EKF estimate noise", None),
-    ("04_sensorless_ekf.yaml", "settling within 2 % on the step up", None),
-    ("04_sensorless_ekf.yaml", "speed at 3000 rpm", None),
-    ("04_sensorless_ekf.yaml", "speed back at 1500 rpm", None),
-    ("05_rotor_position.yaml", "rotor position error, arctan angle (RMS)", None),
-    ("05_rotor_position.yaml", "rotor position error, EKF angle (RMS)", None),
-    ("05_rotor_position.yaml", "rotor position error, arctan angle (peak)", None),
-    ("05_rotor_position.yaml", "rotor position error, EKF angle (peak)", None),
-    ("06_load_step_dc_sag.yaml", "recovery within 0.5 %", None),
-    ("06_load_step_dc_sag.yaml", "flux held through the sag", 'paper-hardware'),
-    ("faults/01_sensorless_frame_drop_burst.yaml", "EKF speed RMS error before the burst", None),
-    ("faults/01_sensorless_frame_drop_burst.yaml", "no board fault", None),
-    ("faults/01_sensorless_frame_drop_burst.yaml", "speed through the burst and recovery", None),
-    ("faults/01_sensorless_frame_drop_burst.yaml", "back within 1 % after the burst", None),
-    ("faults/01_sensorless_frame_drop_burst.yaml", "EKF speed RMS error after recovery", None),
-    ("faults/02_encoder_loss_detected.yaml", "speed while undetected", None),
-    ("faults/02_encoder_loss_detected.yaml", "phase a current gone", None),
-    ("faults/02_encoder_loss_detected.yaml", "phase b current gone", None),
-    ("faults/03_resistance_drift.yaml", "torque estimate error, cold", None),
-    ("faults/03_resistance_drift.yaml", "torque estimate error, hot", None),
-    ("faults/03_resistance_drift.yaml", "true stator flux, hot", None),
-    ("faults/03_resistance_drift.yaml", "board's flux estimate held at its reference", None),
-    ("faults/03_resistance_drift.yaml", "EKF speed RMS error, cold", None),
-    ("faults/03_resistance_drift.yaml", "EKF speed RMS error, hot", None),
-    ("faults/03_resistance_drift.yaml", "EKF speed RMS error, hot over cold", None),
-    ("faults/03_resistance_drift.yaml", "EKF speed bias, hot", None),
-    ("faults/03_resistance_drift.yaml", "speed dip during the drift", None),
-    ("faults/03_resistance_drift.yaml", "speed held on the encoder, hot", None),
-    ("faults/03_resistance_drift.yaml", "motor torque carries the load, hot", None),
-    ("faults/04_dc_link_sag_full_speed.yaml", "flux held during the sag", None),
-    ("faults/04_dc_link_sag_full_speed.yaml", "speed during the sag", None),
-    ("faults/04_dc_link_sag_full_speed.yaml", "speed held at the voltage limit", None),
-    ("faults/04_dc_link_sag_full_speed.yaml", "speed PI saturated by the voltage limit", None),
-    ("faults/04_dc_link_sag_full_speed.yaml", "peak speed after the bus returns", None),
-    ("faults/04_dc_link_sag_full_speed.yaml", "back within 1 % after the bus returns", None),
-    ("faults/04_dc_link_sag_full_speed.yaml", "no board fault", None),
-    ("foc/01_speed_step.yaml", "overshoot", None),
-    ("foc/02_steady_state.yaml", "phase current THD", None),
-    ("foc/02_steady_state.yaml", "torque (i_q) ripple RMS", None),
-    ("foc/02_steady_state.yaml", "flux magnitude (i_d) ripple peak-to-peak", None),
-    ("foc/03_load_step.yaml", "recovery within 1 %", None),
-    ("foc/04_sensorless_ekf.yaml", "settling within 2 % on the step up", None),
-    ("foc/04_sensorless_ekf.yaml", "rotor angle error RMS at 3000 rpm", None),
-    ("foc/04_sensorless_ekf.yaml", "rotor angle error peak at 3000 rpm", None),
-    ("foc/04_sensorless_ekf.yaml", "rotor angle error RMS back at 1500 rpm", None),
-    ("foc/04_sensorless_ekf.yaml", "speed at 3000 rpm", None),
-    ("foc/04_sensorless_ekf.yaml", "speed back at 1500 rpm", None),
-    ("foc/05_encoder_loss.yaml", "speed while undetected", None),
-    ("foc/05_encoder_loss.yaml", "phase a current gone", None),
-    ("foc/05_encoder_loss.yaml", "phase b current gone", None),
-    ("targets/qemu_speed_step.yaml", "overshoot", None),
-}
+# `profile_limits` entry or None for `limits`). Empty: every acceptance limit is a formula of
+# the profile, the board and the plan, or a regression bound whose note names the
+# measurement. It stays empty: a new literal acceptance limit fails the test below. Limits
+# that state an identity (low == high in "1": a state or fault code, a switch pattern) are
+# definitions, not tolerances, and are not listed.
+LITERAL_ACCEPTANCE_LIMITS: set[tuple[str, str, str | None]] = set()
 
 
 def literal_acceptance_limits(paths) -> set[tuple[str, str, str | None]]:
@@ -332,3 +278,35 @@ def test_the_walker_finds_a_literal_acceptance_limit(tmp_path):
         assert ("01.yaml", "rise time 10-90 % (torque-limited)", None) not in literal_acceptance_limits([plans])
     finally:
         PLANS = saved
+
+
+# ------------------------------------------------------------------ bench/hardware_limits.py
+def test_hardware_limits_reads_the_profile_and_agrees_with_the_plans_formulas(tmp_path):
+    """bench/hardware_limits.py models what it reads (issue 34 item 5): a hardware-like profile
+    whose DC-link reading is 2 % high instead of 0.8 % moves its prediction of plan 02's true
+    flux, and the plans' first-order formulas (their constants, bound to the same profile)
+    stay within 0.3 mWb and 0.03 Nm of its fuller second model, on both profiles."""
+    from bench import hardware_limits as hl
+
+    profile = yaml.safe_load((REPO / "plant_rt" / "profiles" / "paper-hardware.yaml").read_text())
+    profile["sensors"]["dc_voltage"]["gain"] = 1.02
+    high_gain = tmp_path / "high-gain.yaml"
+    high_gain.write_text(yaml.safe_dump(profile))
+    try:
+        hl.load(None)
+        nominal = hl.formulas_against_model()
+        hl.load(high_gain)
+        moved = hl.formulas_against_model()
+    finally:
+        hl.load(None)
+    for result in (nominal, moved):
+        assert result["plan02_true_flux_mwb"]["formula"] == pytest.approx(
+            result["plan02_true_flux_mwb"]["second_model"], abs=0.3)
+        assert result["plan06_true_flux_mwb"]["formula"] == pytest.approx(
+            result["plan06_true_flux_mwb"]["second_model"], abs=0.3)
+        assert result["plan01_true_torque_at_the_limit_nm"]["formula"] == pytest.approx(
+            result["plan01_true_torque_at_the_limit_nm"]["second_model"], abs=0.03)
+    # e_v 1.66 % -> 2.86 %: the true flux under the board's 99 mWb falls by about 1.1 mWb
+    for key in ("formula", "second_model"):
+        drop = nominal["plan02_true_flux_mwb"][key] - moved["plan02_true_flux_mwb"][key]
+        assert 0.8 < drop < 1.5, (key, drop)

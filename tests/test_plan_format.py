@@ -187,8 +187,8 @@ def test_param_set_names_follow_the_protocol_header():
     ids = re.findall(r"HIL_PARAM_([A-Z0-9_]+)\s*=\s*(\d+)", block)
     # SPEC 8: ids 1-59 are standard, 60 and up a board's own (the stub's are in its board file)
     standard = {name.lower() for name, pid in ids if int(pid) < 60}
-    assert "control_step_cycles" in standard
-    assert set(BOARD_PARAMS) == standard - {"control_step_cycles"}
+    assert {"control_step_cycles", "sensor_set"} <= standard
+    assert set(BOARD_PARAMS) == standard - {"control_step_cycles", "sensor_set"}  # the read-only ones
 
 
 def test_param_set_errors(tmp_path):

@@ -166,10 +166,10 @@ steps:
 
 
 def test_plan02_hardware_limits_fail_when_the_boards_resistance_is_colder_still(tmp_path):
-    """Plan 02's flux limits on paper-hardware (93.0 .. 97.0 mWb, derived from the board's
-    resistance error dR = 0.0909 ohm: bench/hardware_limits.py predicts 95.0 mWb) fail when
-    the board's R is broken to 0.35 ohm (dR = 0.208 ohm, more than twice the error: the d-axis
-    flux error x = dR i_q / w_e grows from 2.1 to 4.9 mWb and the true flux falls under 93).
+    """Plan 02's flux limits on paper-hardware (its formula flux_true, 97.16 +- 2 mWb, for the
+    board that identifies its R, dR = 0) fail when the board's R is broken to 0.35 ohm
+    (dR = 0.208 ohm: the d-axis flux error x = dR i_q / w_e = 4.9 mWb; bench/hardware_limits.py's
+    first model puts the true flux near 93 mWb, under the 95.16 limit).
     The board must also not measure its R at start-up (paper-hardware turns RS_ID_PERIODS on,
     which would replace the broken 0.35 with the identified value and pass)."""
     plan = _variant(tmp_path, "02_steady_state_3000rpm.yaml",
@@ -179,9 +179,9 @@ def test_plan02_hardware_limits_fail_when_the_boards_resistance_is_colder_still(
 
 
 def test_plan01_hardware_limit_fails_when_the_board_holds_less_torque(tmp_path):
-    """Plan 01's torque-at-the-limit window on paper-hardware (1.58 .. 2.1 Nm) fails when the
-    board's torque limit is broken to 1.6 Nm: the true torque falls to about 1.6 x 1.733 / 2
-    = 1.39 Nm."""
+    """Plan 01's torque-at-the-limit window on paper-hardware (its formula, T_max / ((1 + e_v) g)
+    less 2.5 torque bands .. torque_peak: 1.81 .. 2.10 Nm) fails when the board's torque limit
+    is broken to 1.6 Nm: the true torque falls to about 1.6 / 1.0217 = 1.57 Nm."""
     plan = _variant(tmp_path, "01_speed_step_sensored.yaml", param_set={"torque_limit_nm": 1.6})
     result, _ = run_plan(plan, profile="paper-hardware", reports=False)
     _assert_fails_on(result, "torque at the limit while accelerating")

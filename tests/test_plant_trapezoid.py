@@ -194,20 +194,27 @@ def six_step_180(theta_e: float) -> int:
     return VECTOR_WORDS[round((theta_e + math.pi / 2 + 0.3) / (math.pi / 3)) % 6]
 
 
-@pytest.mark.parametrize("case", ["six_step", "fixed_vector"])
+@pytest.mark.parametrize("case", ["six_step", "six_step_network", "fixed_vector"])
 def test_driven_trapezoid_matches_solve_ivp(case):
     """Six-step words by angle (accelerating from 150 rad/s) and V1 held from standstill (the
     rotor swings through flat tops and ramps): phase currents, speed, angle and torque follow
-    the per-phase reference.
+    the per-phase reference. six_step_network runs the same through the general network
+    (plant_rt.circuit, which a DC link with a source resistance takes: 1e-12 ohm here).
 
     The bound is the sinusoidal accuracy test's (tests/test_plant_accuracy.py: 1e-5 of the
     peak current, 1e-6 of the speed) tightened tenfold for the current: RK4 at 50 us with its
-    steps cut at the trapezoid's corners reaches ~5e-9 of the peak here; an RK4 step across a
+    steps cut at the trapezoid's corners reaches ~7e-9 of the peak here (the network, which
+    ends its steps at the corners as events, ~1e-9); an RK4 step across a
     corner (where d e/dt jumps, so the step loses its order: a local error ~ jump h^3) leaves
-    ~4e-6 of the peak after 1000 periods of six-step, which the limit refuses."""
+    ~9e-6 of the peak after 1000 periods of six-step, which the limit refuses."""
     if case == "six_step":
         profile = trapezoid_profile(initial={"speed_rad_s": 150.0, "theta_m_rad": 0.2},
                                     motor={"pole_pairs": 2})
+        run = driven_run(profile, 1000, six_step_180)
+    elif case == "six_step_network":
+        profile = trapezoid_profile(initial={"speed_rad_s": 150.0, "theta_m_rad": 0.2},
+                                    motor={"pole_pairs": 2},
+                                    dc_link={"source_resistance_ohm": 1e-12})
         run = driven_run(profile, 1000, six_step_180)
     else:
         profile = trapezoid_profile(100.0, initial={"theta_m_rad": 2.0})
@@ -241,27 +248,42 @@ def test_torque_constant_of_120_deg_six_step_is_2_p_psi():
     """Ideal 120-deg six-step on the 120-deg flat top: the driven pair carries +I and -I,
     each where its EMF is flat, the third phase nothing, so T = p psi_r (1 - (-1)) I =
     2 p psi_r I. Spinning at an (almost) constant speed with the pair switched by angle:
-    in every period where the open phase has finished its diode decay (its current exactly
-    zero) and the rotor is inside the sector's middle, T / I = 2 p psi_r."""
+    in every period that starts and ends with the open phase's diode decay over (its current
+    exactly zero) inside the sector's middle, T / I = 2 p psi_r; and the open phase's voltage
+    to the star point is its back-EMF less the zero-sequence part, e_x - sum e / 3 (its
+    current stays zero), averaged over the period as the plant's u is."""
     p = 2
     profile = trapezoid_profile(motor={"pole_pairs": p, "inertia_kgm2": 10.0},
                                 initial={"speed_rad_s": 40.0})
     plant = Plant(profile)
-    kt = 2 * p * profile.motor.flux_linkage_wb
+    psi_r = profile.motor.flux_linkage_wb
+    kt = 2 * p * psi_r
     names = ("i_a", "i_b", "i_c")
+    axes = ((1.0, 0.0), (-0.5, 0.5 * math.sqrt(3)), (-0.5, -0.5 * math.sqrt(3)))
     checked = 0
     for _ in range(4000):
-        theta_e = plant.truth()[F["theta_e_rad"]]
-        word, hi, lo = six_step_120(theta_e)
+        before = plant.truth()
+        theta0 = before[F["theta_e_rad"]]
+        word, hi, lo = six_step_120(theta0)
+        open_phase = 3 - hi - lo
         plant.step(gates=word)
         t = plant.truth()
-        open_phase = 3 - hi - lo
-        into = (math.degrees(t[F["theta_e_rad"]]) - SECTOR_START[hi, lo]) % 360.0
+        theta1 = theta0 + math.remainder(t[F["theta_e_rad"]] - theta0, TWO_PI)
+        into = (math.degrees(theta1) - SECTOR_START[hi, lo]) % 360.0
         if not 5.0 < into < 55.0:               # still in the sector, away from its edges
             continue
-        if abs(t[F[names[open_phase]]]) > 1e-9 or abs(t[F[names[hi]]]) < 1.0:
+        if (abs(before[F[names[open_phase]]]) > 1e-9 or abs(t[F[names[open_phase]]]) > 1e-9
+                or abs(t[F[names[hi]]]) < 1.0):
             continue
         assert t[F[names[lo]]] == pytest.approx(-t[F[names[hi]]], rel=1e-9)
         assert t[F["torque_nm"]] == pytest.approx(kt * t[F[names[hi]]], rel=1e-9)
+        w_e = p * t[F["speed_rad_s"]]
+        sub = np.linspace(theta0, theta1, 401)
+        star = [e[open_phase] - sum(e) / 3 for e in (phase_emfs(x, w_e, psi_r, 120.0)
+                                                     for x in sub)]
+        expected = np.trapezoid(star, sub) / (theta1 - theta0)
+        ex = axes[open_phase]
+        v_open = ex[0] * t[F["u_alpha"]] + ex[1] * t[F["u_beta"]]
+        assert v_open == pytest.approx(expected, abs=1e-6 * w_e * psi_r)
         checked += 1
     assert checked > 1000

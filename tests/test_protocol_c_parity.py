@@ -12,7 +12,9 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from protocol.can_mapping import CanReassembler, can_pack
-from protocol.codec import StreamDecoder, encode_frame, encode_payload
+from protocol.codec import (
+    ProtocolError, StreamDecoder, decode_payload, encode_frame, encode_payload, sample_sensors_size,
+)
 from protocol.can_mapping import COUNTER_NAMES as CAN_COUNTER_NAMES
 from protocol.codec import COUNTER_NAMES
 try:  # tests/ as a package, or as a plain directory on sys.path
@@ -166,6 +168,34 @@ def test_same_can_reassembly(lib, items, drop):
     got, counters = c_can_stream(lib, 0x100, [(i, d, len(d)) for i, d in frames])
     assert got == py
     assert counters == rx.counters
+
+
+# SAMPLE_SENSORS payloads of any set (reserved bits too), mostly of the set's length, else a byte
+# off: the same refusal, or the same message (reserved field bits dropped alike).
+def _sample_sensors_payload(period, sensor_set, status, body, off):
+    known = sensor_set & 0x3FF
+    length = sample_sensors_size(known) - 7 + off
+    return (period.to_bytes(4, "little") + sensor_set.to_bytes(2, "little") + bytes((status,))
+            + body[:max(length, 0)])
+
+
+SAMPLE_SENSORS_PAYLOADS = st.builds(
+    _sample_sensors_payload, st.integers(0, 0xFFFFFFFF),
+    st.one_of(st.integers(0, 0x3FF), st.integers(0, 0x3FF), st.integers(0, 0xFFFF)), st.integers(0, 0xFF),
+    st.binary(min_size=32, max_size=32), st.sampled_from([0, 0, 0, -1, 1]))
+
+
+@SETTINGS
+@given(payload=st.one_of(SAMPLE_SENSORS_PAYLOADS, st.binary(max_size=8)), seq=st.integers(0, 255))
+def test_same_sample_sensors_payload_decoding(lib, payload, seq):
+    out = ctypes.create_string_buffer(128)
+    n = lib.hil_shim_frame_from_payload(0x10, seq, payload, len(payload), out, 128)
+    try:
+        py = encode_frame(decode_payload(0x10, payload), seq)
+    except ProtocolError:
+        assert n == -1  # HIL_ERR_LENGTH
+    else:
+        assert n > 0 and out.raw[:n] == py
 
 
 def test_dlc_above_8_handled_alike(lib):

@@ -21,7 +21,7 @@ from hypothesis import strategies as st
 import protocol
 from protocol import codec as py
 from protocol.messages import (
-    Command, Duty, Fault, Gates, Heartbeat, Hello, ParamGet, ParamSet, ParamValue, Sample, Shutdown,
+    Command, Duty, Fault, Gates, Heartbeat, Hello, ParamGet, ParamSet, ParamValue, Sample, SampleSensors, Shutdown,
     Status, Telemetry,
 )
 from protocol import vector_file
@@ -261,6 +261,9 @@ ODD_MESSAGES = st.one_of(  # fields out of range or of the wrong type: the same 
     st.builds(Fault, _wide(32), _wide(16), FLOATISH),
     st.builds(Heartbeat, _wide(32)),
     st.builds(ParamGet, _wide(16)),
+    st.builds(lambda head, values: SampleSensors(*head, *values),  # the fields of clear bits too
+              st.tuples(_wide(32), st.integers(-2, 0x402), _wide(4)),
+              st.lists(st.one_of(_wide(16), st.integers(-2, 9), st.just(1.0)), min_size=13, max_size=13)),
     st.just(3), st.just(None),
 )
 

@@ -4,14 +4,17 @@ from __future__ import annotations
 
 from dataclasses import replace
 
+from cobs.cobs import encode as cobs_encode
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from protocol.can_mapping import CanReassembler, can_pack
-from protocol.codec import MAX_ENCODED_SEGMENT, FrameEncoder, StreamDecoder, encode_frame
+from protocol.codec import (
+    MAX_ENCODED_SEGMENT, SENSOR_FIELDS, FrameEncoder, StreamDecoder, crc16, encode_frame, encode_payload,
+)
 from protocol.messages import (
-    Command, Duty, DutyLegs, Fault, Gates, Heartbeat, Hello, ParamGet, ParamSet, ParamValue, Sample, Shutdown,
-    Status, Telemetry,
+    SENSOR_SET_ALL, Command, Duty, DutyLegs, Fault, Gates, Heartbeat, Hello, ParamGet, ParamSet, ParamValue,
+    Sample, SampleSensors, Shutdown, Status, Telemetry,
 )
 
 # Deterministic (derandomize): the same examples on every run and machine.
@@ -22,6 +25,20 @@ u8, u16, u32 = st.integers(0, 0xFF), st.integers(0, 0xFFFF), st.integers(0, 0xFF
 adc = st.integers(0, 0xFFF)
 f32 = st.floats(width=32, allow_nan=False)  # NaN is covered bit-exactly in test_protocol_codec
 f32s = st.lists(f32, min_size=12, max_size=12)
+
+
+def sample_sensors(period: int, sensor_set: int, status: int, values: list[int]) -> SampleSensors:
+    """A SAMPLE_SENSORS as a decoder returns it: the fields of clear bits 0, u8 words 3 bits."""
+    kept, i = {}, 0
+    for bit, names, _, limit in SENSOR_FIELDS:
+        for name in names:
+            kept[name] = values[i] & limit if sensor_set & bit else 0
+            i += 1
+    return SampleSensors(period, sensor_set, status, **kept)
+
+
+SAMPLE_SENSORS = st.builds(sample_sensors, u32, st.integers(0, SENSOR_SET_ALL), st.integers(0, 15),
+                           st.lists(u16, min_size=13, max_size=13))
 
 MESSAGES = st.one_of(
     st.builds(Hello, u8, u8, u16, u32, name=st.binary(max_size=40)),
@@ -38,6 +55,7 @@ MESSAGES = st.one_of(
     st.builds(Heartbeat, u32),
     st.just(Shutdown()),
     st.builds(DutyLegs, u32, st.tuples(u16, u16, u16), st.integers(0, 7)),  # reserved bits 0 (CAN)
+    SAMPLE_SENSORS,
 )
 
 
@@ -142,3 +160,36 @@ def test_can_reassembler_never_raises(frames, valid):
     for msg, role in valid:
         results = [rx.feed(i, d) for i, d in can_pack(msg, role, 0x100, 3)]
         assert results[-1] is not None and type(results[-1][0]) is type(msg)
+
+
+@SETTINGS
+@given(msg=SAMPLE_SENSORS, absent=st.lists(u16, min_size=13, max_size=13), seq=u8)
+def test_sample_sensors_fields_of_clear_bits_are_not_sent(msg, absent, seq):
+    """Whatever the fields of clear bits hold, the frame is that of the message with them 0, and
+    its length is 7 + the bytes of the set bits (SPEC 6.13)."""
+    clear = [n for bit, names, _, _ in SENSOR_FIELDS if not msg.sensor_set & bit for n in names]
+    noisy = replace(msg, **dict(zip(clear, absent)))
+    frame = encode_frame(noisy, seq)
+    assert frame == encode_frame(msg, seq)
+    size = 7 + sum(len(codes) * (2 if codes[0] == "H" else 1) for bit, _, codes, _ in SENSOR_FIELDS
+                   if msg.sensor_set & bit)
+    assert StreamDecoder().feed(frame) == [msg]
+    assert len(encode_payload(msg)) == size
+
+
+@SETTINGS
+@given(msg=SAMPLE_SENSORS, extra=st.integers(-3, 3), reserved=st.integers(1, 0x3F), seq=u8)
+def test_sample_sensors_length_must_match_the_set(msg, extra, reserved, seq):
+    """A payload one or more bytes off its set's length, or with a reserved set bit, is one
+    length error and no message."""
+    payload = encode_payload(msg)
+    if extra:
+        payload = (payload + bytes(extra))[:len(payload) + extra] if extra > 0 else payload[:extra]
+    else:
+        bad_set = msg.sensor_set | reserved << 10
+        payload = payload[:4] + bad_set.to_bytes(2, "little") + payload[6:]
+    raw = bytes((1, 0x10, seq, len(payload))) + payload
+    frame = cobs_encode(raw + crc16(raw).to_bytes(2, "little")) + b"\x00"
+    dec = StreamDecoder()
+    assert dec.feed(frame) == []
+    assert dec.counters == dict.fromkeys(dec.counters, 0) | {"length_errors": 1}

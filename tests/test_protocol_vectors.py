@@ -11,6 +11,7 @@ test_protocol_c_parity.py.
 from __future__ import annotations
 
 import random
+import re
 import struct
 
 import pytest
@@ -130,6 +131,22 @@ def test_handbuilt_has_the_spec_examples():
     assert HANDBUILT.messages["hb_sample_spec"].serial == bytes.fromhex(
         "08010207 0b40e201 0109883e b85be8fd 3d7b00")
     assert HANDBUILT.messages["hb_sample_spec"].can == [(0x102, bytes.fromhex("4000883eb85be8fd"))]
+
+
+def test_spec_sample_sensors_example_is_the_handbuilt_vector():
+    """SPEC 6.13's payload, 7.4's CAN frames and 10's wire bytes of the Hall six-step
+    SAMPLE_SENSORS, as printed, are hb_sample_sensors_hall byte for byte."""
+    spec = (HANDBUILT_PATH.parents[1] / "SPEC.md").read_text()
+    table = spec[spec.index("### 6.13 SAMPLE_SENSORS"):spec.index("## 7. CAN mapping")]
+    payload = "".join(re.findall(r"^((?:[0-9A-F]{2} )+) ", table.split("```")[1], re.M))
+    example = spec[spec.index("SAMPLE_SENSORS, the Hall six-step example"):spec.index("(These bytes are in the vector")]
+    wire = re.search(r"^wire  ([0-9A-F ]+)$", example, re.M).group(1)
+    segmented = spec[spec.index("### 7.4 Segmented"):spec.index("Reassembly, one slot")]
+    can = re.search(r"identifier 0x110, data\s+`([0-9A-F ]+)`,\s+`([0-9A-F ]+)`,\s+`([0-9A-F ]+)`", segmented)
+    vector = HANDBUILT.messages["hb_sample_sensors_hall"]
+    assert bytes.fromhex(payload) == vector.raw[4:]
+    assert bytes.fromhex(wire) == vector.serial
+    assert [(0x110, bytes.fromhex(g)) for g in can.groups()] == vector.can
 
 
 def test_wrong_crc_line_is_caught(tmp_path):

@@ -336,7 +336,7 @@ def test_plugin_collects_one_item_per_check(pytester, fake_runner):
 
 def test_plugin_runs_the_plan_once_and_reports_each_check(pytester, fake_runner):
     plans = pytester.mkdir("test_plans")
-    text = step_plan_text().replace("limits: {high: 5, marginal: 1, unit: \"%\"}",
+    text = step_plan_text().replace("limits: {high: \"overshoot_model + 1.5 / 100\", marginal: 1, unit: \"%\"}",
                                                "limits: {high: 1, unit: \"%\"}")
     (plans / "step.yaml").write_text(text)
     out = pytester.path / "out"
@@ -411,7 +411,7 @@ def test_bench_fixture_opens_and_closes_a_bench(pytester, monkeypatch):
 
 def test_plugin_marginal_passes_with_a_warning(pytester, fake_runner):
     plans = pytester.mkdir("test_plans")
-    text = step_plan_text().replace("limits: {high: 5, marginal: 1, unit: \"%\"}",
+    text = step_plan_text().replace("limits: {high: \"overshoot_model + 1.5 / 100\", marginal: 1, unit: \"%\"}",
                                                "limits: {high: 3.5, marginal: 1, unit: \"%\"}")
     (plans / "step.yaml").write_text(text)
     # Run from the pytest console script, the outer process has already imported the plugin

@@ -233,18 +233,146 @@ static float get_f32(const uint8_t *p)
 #define SHUTDOWN_SIZE 0u
 #define DUTY_LEGS_SIZE 11u
 #define TELEMETRY_FLOATS 12u
+#define SENSOR_SET_BITS 10u
+#define SAMPLE_SENSORS_STATUS_MAX 0x0Fu /* status bits 4-7 reserved */
+#define SENSOR_BITS3_MAX 0x07u          /* hall and comparator words: bits 3-7 reserved */
 
 static int type_known(uint8_t type)
 {
     return (type >= (uint8_t)HIL_MSG_HELLO && type <= (uint8_t)HIL_MSG_SHUTDOWN) ||
-           type == (uint8_t)HIL_MSG_DUTY_LEGS;
+           type == (uint8_t)HIL_MSG_DUTY_LEGS || type == (uint8_t)HIL_MSG_SAMPLE_SENSORS;
 }
 
-/* Fixed payload size per type; HELLO's is its fixed part. */
+/* Fixed payload size per type; HELLO's and SAMPLE_SENSORS' is their fixed part. */
 static const uint8_t payload_size[HIL_MSG_TYPE_MAX + 1u] = {
     0u, HELLO_FIXED_SIZE, SAMPLE_SIZE, GATES_SIZE, DUTY_SIZE, COMMAND_SIZE, TELEMETRY_SIZE,
     PARAM_SET_SIZE, PARAM_GET_SIZE, PARAM_VALUE_SIZE, STATUS_SIZE, FAULT_SIZE, HEARTBEAT_SIZE,
-    SHUTDOWN_SIZE, 0u /* 0x0E undefined */, DUTY_LEGS_SIZE};
+    SHUTDOWN_SIZE, 0u /* 0x0E undefined */, DUTY_LEGS_SIZE, HIL_SAMPLE_SENSORS_FIXED_SIZE};
+
+/* Wire bytes of the fields of sensor-set bit i (SPEC.md 9.8). */
+static const uint8_t sensor_bit_size[SENSOR_SET_BITS] = {2u, 2u, 2u, 2u, 2u, 1u, 6u, 1u, 4u, 2u};
+
+/* Payload length of SAMPLE_SENSORS with this set, or -1 for a set with a reserved bit (whose
+ * layout this version cannot know). */
+static int sample_sensors_size(uint16_t sensor_set)
+{
+    if ((sensor_set & ~HIL_SENSOR_SET_ALL) != 0u) {
+        return -1;
+    }
+    int n = (int)HIL_SAMPLE_SENSORS_FIXED_SIZE;
+    for (unsigned i = 0; i < SENSOR_SET_BITS; i++) {
+        if ((((uint32_t)sensor_set >> i) & 1u) != 0u) {
+            n += sensor_bit_size[i];
+        }
+    }
+    return n;
+}
+
+/* The encoder's refusals: reserved bits set, in the set or in a present field (SPEC.md 6.13). */
+static int sample_sensors_check(const hil_sample_sensors *s)
+{
+    if ((s->sensor_set & ~HIL_SENSOR_SET_ALL) != 0u || s->status > SAMPLE_SENSORS_STATUS_MAX) {
+        return HIL_ERR_RANGE;
+    }
+    if (((s->sensor_set & HIL_SENSOR_HALL) != 0u && s->hall > SENSOR_BITS3_MAX) ||
+        ((s->sensor_set & HIL_SENSOR_BEMF_COMPARATORS) != 0u && s->bemf_comparators > SENSOR_BITS3_MAX)) {
+        return HIL_ERR_RANGE;
+    }
+    return HIL_OK;
+}
+
+/* The fields of the set bits, in bit order, after the fixed part; the others are not sent. */
+static void sample_sensors_put(uint8_t *p, const hil_sample_sensors *s)
+{
+    const uint16_t set = s->sensor_set;
+    put_u32(p, s->period);
+    put_u16(p + 4, set);
+    p[6] = s->status;
+    p += HIL_SAMPLE_SENSORS_FIXED_SIZE;
+    const uint16_t currents[3] = {s->adc_ia, s->adc_ib, s->adc_ic};
+    for (unsigned i = 0; i < 3u; i++) {
+        if (((uint32_t)set & (HIL_SENSOR_CURRENT_A << i)) != 0u) {
+            put_u16(p, currents[i]);
+            p += 2;
+        }
+    }
+    if ((set & HIL_SENSOR_VDC) != 0u) {
+        put_u16(p, s->adc_vdc);
+        p += 2;
+    }
+    if ((set & HIL_SENSOR_ENCODER) != 0u) {
+        put_u16(p, s->encoder);
+        p += 2;
+    }
+    if ((set & HIL_SENSOR_HALL) != 0u) {
+        *p++ = s->hall;
+    }
+    if ((set & HIL_SENSOR_TERMINAL_VOLTAGES) != 0u) {
+        put_u16(p, s->adc_va);
+        put_u16(p + 2, s->adc_vb);
+        put_u16(p + 4, s->adc_vc);
+        p += 6;
+    }
+    if ((set & HIL_SENSOR_BEMF_COMPARATORS) != 0u) {
+        *p++ = s->bemf_comparators;
+    }
+    if ((set & HIL_SENSOR_RESOLVER) != 0u) {
+        put_u16(p, s->adc_resolver_sin);
+        put_u16(p + 2, s->adc_resolver_cos);
+        p += 4;
+    }
+    if ((set & HIL_SENSOR_TEMPERATURE) != 0u) {
+        put_u16(p, s->adc_temperature);
+    }
+}
+
+/* The inverse of sample_sensors_put for a payload whose length was checked; absent fields 0.
+ * Reserved status, hall and comparator bits are ignored on receipt (SPEC.md 6.13): dropped
+ * here, so that every decoded message encodes again. */
+static void sample_sensors_get(const uint8_t *p, hil_sample_sensors *s)
+{
+    memset(s, 0, sizeof *s);
+    s->period = get_u32(p);
+    const uint16_t set = get_u16(p + 4);
+    s->sensor_set = set;
+    s->status = (uint8_t)(p[6] & SAMPLE_SENSORS_STATUS_MAX);
+    p += HIL_SAMPLE_SENSORS_FIXED_SIZE;
+    uint16_t *const currents[3] = {&s->adc_ia, &s->adc_ib, &s->adc_ic};
+    for (unsigned i = 0; i < 3u; i++) {
+        if (((uint32_t)set & (HIL_SENSOR_CURRENT_A << i)) != 0u) {
+            *currents[i] = get_u16(p);
+            p += 2;
+        }
+    }
+    if ((set & HIL_SENSOR_VDC) != 0u) {
+        s->adc_vdc = get_u16(p);
+        p += 2;
+    }
+    if ((set & HIL_SENSOR_ENCODER) != 0u) {
+        s->encoder = get_u16(p);
+        p += 2;
+    }
+    if ((set & HIL_SENSOR_HALL) != 0u) {
+        s->hall = (uint8_t)(*p++ & SENSOR_BITS3_MAX);
+    }
+    if ((set & HIL_SENSOR_TERMINAL_VOLTAGES) != 0u) {
+        s->adc_va = get_u16(p);
+        s->adc_vb = get_u16(p + 2);
+        s->adc_vc = get_u16(p + 4);
+        p += 6;
+    }
+    if ((set & HIL_SENSOR_BEMF_COMPARATORS) != 0u) {
+        s->bemf_comparators = (uint8_t)(*p++ & SENSOR_BITS3_MAX);
+    }
+    if ((set & HIL_SENSOR_RESOLVER) != 0u) {
+        s->adc_resolver_sin = get_u16(p);
+        s->adc_resolver_cos = get_u16(p + 2);
+        p += 4;
+    }
+    if ((set & HIL_SENSOR_TEMPERATURE) != 0u) {
+        s->adc_temperature = get_u16(p);
+    }
+}
 
 /* Three 12-bit ADC counts and 4 status bits as one 40-bit little-endian field. */
 static int adc40_check(const hil_sample *s)
@@ -286,6 +414,12 @@ static int payload_length(const hil_msg *msg)
     if (msg->type == (uint8_t)HIL_MSG_SAMPLE && adc40_check(&msg->u.sample) != HIL_OK) {
         return HIL_ERR_RANGE;
     }
+    if (msg->type == (uint8_t)HIL_MSG_SAMPLE_SENSORS) {
+        if (sample_sensors_check(&msg->u.sample_sensors) != HIL_OK) {
+            return HIL_ERR_RANGE;
+        }
+        return sample_sensors_size(msg->u.sample_sensors.sensor_set);
+    }
     return (int)payload_size[msg->type];
 }
 
@@ -323,6 +457,9 @@ static void payload_write(const hil_msg *msg, uint8_t *p)
             put_u16(p + 4 + 2 * i, msg->u.duty_legs.duty[i]);
         }
         p[10] = msg->u.duty_legs.leg_enable;
+        break;
+    case HIL_MSG_SAMPLE_SENSORS:
+        sample_sensors_put(p, &msg->u.sample_sensors);
         break;
     case HIL_MSG_COMMAND:
         p[0] = msg->u.command.flags;
@@ -400,6 +537,11 @@ int hil_payload_decode(uint8_t type, const uint8_t *p, size_t len, hil_msg *msg)
         if (len < HELLO_FIXED_SIZE || p[8] > HIL_NAME_MAX || len != HELLO_FIXED_SIZE + p[8]) {
             return HIL_ERR_LENGTH;
         }
+    } else if (type == (uint8_t)HIL_MSG_SAMPLE_SENSORS) {
+        /* a reserved set bit leaves the layout unknown: a length error too */
+        if (len < HIL_SAMPLE_SENSORS_FIXED_SIZE || sample_sensors_size(get_u16(p + 4)) != (int)len) {
+            return HIL_ERR_LENGTH;
+        }
     } else if (len != payload_size[type]) {
         return HIL_ERR_LENGTH;
     }
@@ -437,6 +579,9 @@ int hil_payload_decode(uint8_t type, const uint8_t *p, size_t len, hil_msg *msg)
             msg->u.duty_legs.duty[i] = get_u16(p + 4 + 2 * i);
         }
         msg->u.duty_legs.leg_enable = p[10]; /* reserved bits kept as received; users ignore them */
+        break;
+    case HIL_MSG_SAMPLE_SENSORS:
+        sample_sensors_get(p, &msg->u.sample_sensors);
         break;
     case HIL_MSG_COMMAND:
         msg->u.command.flags = p[0];
@@ -714,7 +859,8 @@ size_t hil_decoder_feed_buf(hil_decoder *d, const uint8_t *data, size_t len, hil
 static int can_segmented(uint8_t type)
 {
     return type == (uint8_t)HIL_MSG_HELLO || type == (uint8_t)HIL_MSG_COMMAND ||
-           type == (uint8_t)HIL_MSG_TELEMETRY || type == (uint8_t)HIL_MSG_FAULT;
+           type == (uint8_t)HIL_MSG_TELEMETRY || type == (uint8_t)HIL_MSG_FAULT ||
+           type == (uint8_t)HIL_MSG_SAMPLE_SENSORS;
 }
 
 int hil_can_pack(const hil_msg *msg, uint8_t sender_role, uint16_t base_id, hil_can_frame *frames,
@@ -840,6 +986,9 @@ static void can_note_period(hil_can_rx *rx, const hil_msg *msg)
     case HIL_MSG_FAULT:
         period = msg->u.fault.period;
         break;
+    case HIL_MSG_SAMPLE_SENSORS:
+        period = msg->u.sample_sensors.period;
+        break;
     default:
         return;
     }
@@ -891,6 +1040,12 @@ static int can_single(hil_can_rx *rx, uint8_t type, const hil_can_frame *f, hil_
 /* Payload length of a segmented message: 0 while not yet known, -1 when invalid. */
 static int can_expected_len(const hil_can_slot *s)
 {
+    if (s->type == (uint8_t)HIL_MSG_SAMPLE_SENSORS) {
+        if (s->len < HIL_SAMPLE_SENSORS_FIXED_SIZE - 1u) { /* sensor_set is payload bytes 4-5 */
+            return 0;
+        }
+        return sample_sensors_size(get_u16(s->buf + 4));
+    }
     if (s->type != (uint8_t)HIL_MSG_HELLO) {
         return (int)payload_size[s->type];
     }

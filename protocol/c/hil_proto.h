@@ -44,9 +44,10 @@ typedef enum {
     HIL_MSG_HEARTBEAT = 0x0C,   /* both ways */
     HIL_MSG_SHUTDOWN = 0x0D,    /* bench -> controller: stop switching and exit */
     /* 0x0E is not defined (the vector files use it as the unknown type) */
-    HIL_MSG_DUTY_LEGS = 0x0F    /* controller -> plant, DUTY with a per-leg enable */
+    HIL_MSG_DUTY_LEGS = 0x0F,   /* controller -> plant, DUTY with a per-leg enable */
+    HIL_MSG_SAMPLE_SENSORS = 0x10 /* plant -> controller with HIL_CAP_SENSOR_SET, instead of SAMPLE */
 } hil_msg_type;
-#define HIL_MSG_TYPE_MAX 0x0Fu /* the highest type code defined in this version */
+#define HIL_MSG_TYPE_MAX 0x10u /* the highest type code defined in this version */
 
 typedef enum { HIL_ROLE_BENCH = 0, HIL_ROLE_CONTROLLER = 1 } hil_role;
 
@@ -56,6 +57,23 @@ typedef enum { HIL_ROLE_BENCH = 0, HIL_ROLE_CONTROLLER = 1 } hil_role;
 #define HIL_CAP_TELEMETRY 0x0004u /* sends TELEMETRY */
 #define HIL_CAP_CAN 0x0008u       /* reachable over the CAN mapping */
 #define HIL_CAP_DUTY_LEGS 0x0010u /* answers SAMPLE with DUTY_LEGS */
+#define HIL_CAP_SENSOR_SET 0x0020u /* reads SAMPLE_SENSORS; its sensor set is parameter SENSOR_SET */
+
+/* SAMPLE_SENSORS sensor-set bits: the fields of each set bit follow the fixed part in bit
+ * order (SPEC.md 6.13, 9.8); bits 10-15 reserved (a frame with one is a length error) */
+#define HIL_SENSOR_CURRENT_A 0x0001u         /* adc_ia u16 */
+#define HIL_SENSOR_CURRENT_B 0x0002u         /* adc_ib u16 */
+#define HIL_SENSOR_CURRENT_C 0x0004u         /* adc_ic u16 */
+#define HIL_SENSOR_VDC 0x0008u               /* adc_vdc u16 */
+#define HIL_SENSOR_ENCODER 0x0010u           /* encoder u16 */
+#define HIL_SENSOR_HALL 0x0020u              /* hall u8 */
+#define HIL_SENSOR_TERMINAL_VOLTAGES 0x0040u /* adc_va, adc_vb, adc_vc u16 */
+#define HIL_SENSOR_BEMF_COMPARATORS 0x0080u  /* bemf_comparators u8 */
+#define HIL_SENSOR_RESOLVER 0x0100u          /* adc_resolver_sin, adc_resolver_cos u16 */
+#define HIL_SENSOR_TEMPERATURE 0x0200u       /* adc_temperature u16 */
+#define HIL_SENSOR_SET_ALL 0x03FFu
+#define HIL_SAMPLE_SENSORS_FIXED_SIZE 7u /* period u32, sensor_set u16, status u8 */
+#define HIL_SAMPLE_SENSORS_MAX_SIZE 31u  /* every bit set */
 
 /* DUTY_LEGS leg_enable bits: 1 = the leg switches (complementary PWM as in DUTY), 0 = floated
  * (both switches off: the phase current free-wheels through the diodes); bits 3-7 reserved (0) */
@@ -126,10 +144,16 @@ typedef enum {
     HIL_PARAM_VDC_OFFSET_COUNTS = 5,
     HIL_PARAM_ENCODER_COUNTS_PER_REV = 6,
     HIL_PARAM_CURRENT_PHASES = 7, /* 0: a,b  1: a,c  2: b,c */
+    HIL_PARAM_SENSOR_SET = 8,     /* read-only: the board's SAMPLE_SENSORS set (HIL_SENSOR_* bits) */
     HIL_PARAM_POLE_PAIRS = 10,
     HIL_PARAM_STATOR_RESISTANCE_OHM = 11,
     HIL_PARAM_STATOR_INDUCTANCE_H = 12,
     HIL_PARAM_MAGNET_FLUX_WB = 13,
+    HIL_PARAM_TERMINAL_V_PER_COUNT = 14,       /* phase terminal volts per count, divider included */
+    HIL_PARAM_RESOLVER_POLE_PAIRS = 15,        /* resolver electrical turns per mechanical turn */
+    HIL_PARAM_RESOLVER_OFFSET_COUNTS = 16,     /* resolver sin/cos count at zero signal */
+    HIL_PARAM_TEMPERATURE_DEGC_PER_COUNT = 17,
+    HIL_PARAM_TEMPERATURE_OFFSET_COUNTS = 18,  /* temperature count at 0 degC */
     HIL_PARAM_FLUX_REF_WB = 20,
     HIL_PARAM_FLUX_BAND_WB = 21,
     HIL_PARAM_TORQUE_BAND_NM = 22,
@@ -172,6 +196,27 @@ typedef struct {
     uint16_t encoder;  /* quadrature counter, wraps at 65536 */
     uint8_t status;    /* HIL_STATUS_* (4 bits used) */
 } hil_sample;
+
+/* SAMPLE_SENSORS: only the fields of set sensor_set bits travel; the decoder sets the others
+ * to 0, the encoder ignores them. Counts are u16 (ADCs up to 16 bits). */
+typedef struct {
+    uint32_t period;     /* period index k: sensors sampled at t = k * T */
+    uint16_t sensor_set; /* HIL_SENSOR_* bits */
+    uint8_t status;      /* HIL_STATUS_* (bits 0-3; 4-7 reserved) */
+    uint16_t adc_ia;     /* phase-a current, ADC counts */
+    uint16_t adc_ib;
+    uint16_t adc_ic;
+    uint16_t adc_vdc;    /* DC-link voltage, ADC counts */
+    uint16_t encoder;    /* quadrature counter, wraps at 65536 */
+    uint8_t hall;        /* bit 0 Hall A, bit 1 B, bit 2 C; 3-7 reserved */
+    uint16_t adc_va;     /* phase-a terminal voltage to DC-, ADC counts */
+    uint16_t adc_vb;
+    uint16_t adc_vc;
+    uint8_t bemf_comparators; /* bit x: phase x terminal above the virtual neutral; 3-7 reserved */
+    uint16_t adc_resolver_sin;
+    uint16_t adc_resolver_cos;
+    uint16_t adc_temperature; /* winding temperature, ADC counts */
+} hil_sample_sensors;
 
 typedef struct {
     uint32_t period; /* the SAMPLE period this answers */
@@ -265,6 +310,7 @@ typedef struct {
         hil_fault fault;
         hil_heartbeat heartbeat;
         hil_duty_legs duty_legs;
+        hil_sample_sensors sample_sensors;
     } u;
 } hil_msg;
 
@@ -274,7 +320,8 @@ typedef enum {
     HIL_ERR_UNKNOWN_TYPE = -2, /* type code not in this version */
     HIL_ERR_VERSION = -3,      /* frame from another protocol version */
     HIL_ERR_RANGE = -4,        /* field out of range (name_len > 40, SAMPLE count > 4095, bad CAN role/base,
-                                * DUTY_LEGS reserved leg bits on CAN) */
+                                * DUTY_LEGS reserved leg bits on CAN, SAMPLE_SENSORS reserved set, status,
+                                * hall or comparator bits) */
     HIL_ERR_BUFFER = -5        /* caller's buffer too small */
 } hil_result;
 
@@ -324,7 +371,8 @@ size_t hil_decoder_feed_buf(hil_decoder *dec, const uint8_t *data, size_t len, h
 
 /* CAN mapping (classic CAN, 11-bit identifiers):
  * id = base_id + 0x20 * sender_role + type. SAMPLE, GATES, DUTY and DUTY_LEGS fit one
- * 8-byte frame; longer messages are split over numbered frames (SPEC.md). */
+ * 8-byte frame; longer messages (HELLO, COMMAND, TELEMETRY, FAULT, SAMPLE_SENSORS) are split
+ * over numbered frames (SPEC.md). */
 #define HIL_CAN_DEFAULT_BASE_ID 0x100u
 #define HIL_CAN_MAX_FRAMES 16u
 typedef struct {

@@ -64,12 +64,16 @@ static const char *const field_names[NTYPES][MAX_FIELDS + 1] = {
     [HIL_MSG_HEARTBEAT] = {"counter", NULL},
     [HIL_MSG_SHUTDOWN] = {NULL},
     [HIL_MSG_DUTY_LEGS] = {"period", "duty", "leg_enable", NULL},
+    [HIL_MSG_SAMPLE_SENSORS] = {"period", "sensor_set", "status", "adc_ia", "adc_ib", "adc_ic", "adc_vdc",
+                                "encoder", "hall", "adc_va", "adc_vb", "adc_vc", "bemf_comparators",
+                                "adc_resolver_sin", "adc_resolver_cos", "adc_temperature", NULL},
 };
 
 /* The type codes this version defines (0x0E is not one: it has no class). */
 static int type_defined(int type)
 {
-    return (type >= HIL_MSG_HELLO && type <= HIL_MSG_SHUTDOWN) || type == HIL_MSG_DUTY_LEGS;
+    return (type >= HIL_MSG_HELLO && type <= HIL_MSG_SHUTDOWN) || type == HIL_MSG_DUTY_LEGS ||
+           type == HIL_MSG_SAMPLE_SENSORS;
 }
 
 #define SLOT(obj, off) (*(PyObject **)((char *)(obj) + (off)))
@@ -201,6 +205,19 @@ static PyObject *message_object(const hil_msg *m)
         const uint16_t *d = m->u.duty_legs.duty;
         rc = PUT_U(0, m->u.duty_legs.period) |
              put(obj, t, 1, Py_BuildValue("(HHH)", d[0], d[1], d[2])) | PUT_U(2, m->u.duty_legs.leg_enable);
+        break;
+    }
+    case HIL_MSG_SAMPLE_SENSORS: {
+        const hil_sample_sensors *s = &m->u.sample_sensors;
+        const unsigned long v[16] = {s->period,           s->sensor_set,       s->status,
+                                     s->adc_ia,           s->adc_ib,           s->adc_ic,
+                                     s->adc_vdc,          s->encoder,          s->hall,
+                                     s->adc_va,           s->adc_vb,           s->adc_vc,
+                                     s->bemf_comparators, s->adc_resolver_sin, s->adc_resolver_cos,
+                                     s->adc_temperature};
+        for (int i = 0; i < 16 && rc == 0; i++) {
+            rc = PUT_U(i, v[i]);
+        }
         break;
     }
     case HIL_MSG_TELEMETRY: {
@@ -385,6 +402,25 @@ static int message_struct(PyObject *obj, hil_msg *m)
         }
         GET_AS(uint8_t, 2, U8, m->u.duty_legs.leg_enable);
         break;
+    case HIL_MSG_SAMPLE_SENSORS: {
+        /* every field read at its C width; the reserved-bit limits are the codec's own
+         * (HIL_ERR_RANGE), and a value that fits no C field goes to the Python codec, which
+         * ignores the fields of clear bits as hil_proto.c does */
+        hil_sample_sensors *s = &m->u.sample_sensors;
+        uint16_t *const u16[11] = {&s->adc_ia, &s->adc_ib, &s->adc_ic, &s->adc_vdc, &s->encoder, &s->adc_va,
+                                   &s->adc_vb, &s->adc_vc, &s->adc_resolver_sin, &s->adc_resolver_cos,
+                                   &s->adc_temperature};
+        static const int u16_slot[11] = {3, 4, 5, 6, 7, 9, 10, 11, 13, 14, 15};
+        GET_U(0, U32, s->period);
+        GET_AS(uint16_t, 1, U16, s->sensor_set);
+        GET_AS(uint8_t, 2, U8, s->status);
+        GET_AS(uint8_t, 8, U8, s->hall);
+        GET_AS(uint8_t, 12, U8, s->bemf_comparators);
+        for (int i = 0; i < 11; i++) {
+            GET_AS(uint16_t, u16_slot[i], U16, *u16[i]);
+        }
+        break;
+    }
     case HIL_MSG_TELEMETRY: {
         hil_telemetry *s = &m->u.telemetry;
         float *const f[12] = {&s->speed_feedback_rad_s, &s->speed_encoder_rad_s, &s->speed_raw_rad_s,

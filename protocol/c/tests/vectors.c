@@ -74,13 +74,29 @@ static const field_desc FIELDS[] = {
     FD(HIL_MSG_DUTY_LEGS, "period", F_U32, u.duty_legs.period),
     FD(HIL_MSG_DUTY_LEGS, "duty", F_DUTY, u.duty_legs.duty),
     FD(HIL_MSG_DUTY_LEGS, "leg_enable", F_U8, u.duty_legs.leg_enable),
+    FD(HIL_MSG_SAMPLE_SENSORS, "period", F_U32, u.sample_sensors.period),
+    FD(HIL_MSG_SAMPLE_SENSORS, "sensor_set", F_U16, u.sample_sensors.sensor_set),
+    FD(HIL_MSG_SAMPLE_SENSORS, "status", F_U8, u.sample_sensors.status),
+    FD(HIL_MSG_SAMPLE_SENSORS, "adc_ia", F_U16, u.sample_sensors.adc_ia),
+    FD(HIL_MSG_SAMPLE_SENSORS, "adc_ib", F_U16, u.sample_sensors.adc_ib),
+    FD(HIL_MSG_SAMPLE_SENSORS, "adc_ic", F_U16, u.sample_sensors.adc_ic),
+    FD(HIL_MSG_SAMPLE_SENSORS, "adc_vdc", F_U16, u.sample_sensors.adc_vdc),
+    FD(HIL_MSG_SAMPLE_SENSORS, "encoder", F_U16, u.sample_sensors.encoder),
+    FD(HIL_MSG_SAMPLE_SENSORS, "hall", F_U8, u.sample_sensors.hall),
+    FD(HIL_MSG_SAMPLE_SENSORS, "adc_va", F_U16, u.sample_sensors.adc_va),
+    FD(HIL_MSG_SAMPLE_SENSORS, "adc_vb", F_U16, u.sample_sensors.adc_vb),
+    FD(HIL_MSG_SAMPLE_SENSORS, "adc_vc", F_U16, u.sample_sensors.adc_vc),
+    FD(HIL_MSG_SAMPLE_SENSORS, "bemf_comparators", F_U8, u.sample_sensors.bemf_comparators),
+    FD(HIL_MSG_SAMPLE_SENSORS, "adc_resolver_sin", F_U16, u.sample_sensors.adc_resolver_sin),
+    FD(HIL_MSG_SAMPLE_SENSORS, "adc_resolver_cos", F_U16, u.sample_sensors.adc_resolver_cos),
+    FD(HIL_MSG_SAMPLE_SENSORS, "adc_temperature", F_U16, u.sample_sensors.adc_temperature),
 };
 
 static const char *const TYPE_NAMES[] = {"",          "HELLO",     "SAMPLE",      "GATES",
                                          "DUTY",      "COMMAND",   "TELEMETRY",   "PARAM_SET",
                                          "PARAM_GET", "PARAM_VALUE", "STATUS",    "FAULT",
                                          "HEARTBEAT", "SHUTDOWN",  "" /* 0x0E undefined */,
-                                         "DUTY_LEGS"};
+                                         "DUTY_LEGS", "SAMPLE_SENSORS"};
 
 typedef struct {
     const char *path;
