@@ -41,8 +41,8 @@ def test_the_ranges_follow_the_profile_by_the_documented_formulas():
         LIMITS.speed_ref_rpm(6000.5)
     mask = sum(1 << b for b in MODBUS_BITS)
     assert LIMITS.fault_bits(mask) == mask
-    with pytest.raises(ControlInputError, match=r"bits 0x200000 name no fault"):
-        LIMITS.fault_bits(1 << 21)
+    with pytest.raises(ControlInputError, match=r"bits 0x800000 name no fault"):
+        LIMITS.fault_bits(1 << 23)
 
 
 @pytest.mark.parametrize("value", [math.nan, math.inf, -math.inf, 1e39, True, None, "1", 2**1100])
@@ -85,7 +85,7 @@ def test_modbus_writes_use_the_same_validator_and_are_counted():
     server = _PortServer(_PortConfig(None, 0, None, 19200, 1, None, None, 0xFFFFFFFF, None, LIMITS),
                          mailbox)
     for write in ({"speed_reference": 6000.01}, {"load_torque": 10.5},
-                  {"fault_injection": 1 << 21}, {"dc_link_voltage_setpoint": 140.01},
+                  {"fault_injection": 1 << 23}, {"dc_link_voltage_setpoint": 140.01},
                   {"speed_reference": 100.0, "load_torque": 11.0}):          # all or nothing
         assert server._apply(write) == ExcCodes.ILLEGAL_VALUE, write
     assert mailbox.writes_refused == 5 and mailbox.take_requests() is None

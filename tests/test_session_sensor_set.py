@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 from configfile.source import ConfigError
 from plant_rt import Plant, load_profile
-from protocol.messages import (CAP_GATES, CAP_SENSOR_SET, SENSOR_SET_NAMES, ParamGet, Sample,
-                               SampleSensors)
+from protocol.messages import (CAP_GATES, CAP_SENSOR_SET, SENSOR_SET_NAMES, Gates, ParamGet,
+                               Sample, SampleSensors)
 
 from hil.boards import load_board
 from hil.boards.sensor_fields import ALL_SENSOR_FIELDS, SENSOR_FIELDS_OF
@@ -113,6 +113,33 @@ def test_board_gets_sample_sensors_with_exactly_its_set_and_the_plants_values(tm
     assert list(signals["sample.hall"][1]) == [rows[k]["hall"] for k in range(PERIODS)]
     assert list(signals["sample.adc_ic"][1]) == [rows[k]["adc_ic"] for k in range(PERIODS)]
     assert "plant.winding_temperature_degc" in signals
+    # the temperature sensor's scaling pushed from the profile (SPEC 8, ids 17 and 18)
+    sensors = load_profile().sensors
+    assert board.params[17] == np.float32(sensors.temperature.degc_per_count)
+    assert board.params[18] == np.float32(sensors.temperature.offset_counts)
+    assert 14 not in board.params              # no terminal voltages in this set
+
+
+def test_a_resend_is_the_same_sample_sensors(tmp_path):
+    """SPEC 2.8.1: the board leaves period 5's first SAMPLE_SENSORS unanswered; the bench
+    resends that very message (not a SAMPLE, not a new frame)."""
+    mask = mask_of(HALL_SET)
+    ignored = []
+
+    def answer(msg, encoder):
+        if msg.period == 5 and not ignored:
+            ignored.append(msg)
+            return b""
+        return encoder.encode(Gates(period=msg.period, gates=0))
+
+    with FakeBoard(capabilities=SENSOR_CAPS, sensor_set=mask, on_sample=answer) as board:
+        with session(board.url, board_file(tmp_path, HALL_SET)) as s:
+            s.run_periods(10)
+            assert s.resent_samples == 1 and s.missed_answers == 0
+        got = [m for m in board.received if isinstance(m, (Sample, SampleSensors))]
+    fifth = [m for m in got if m.period == 5]
+    assert len(fifth) == 2 and fifth[0] == fifth[1] and type(fifth[1]) is SampleSensors
+    assert_frames_match(received_rows(got), mask, 10)
 
 
 def test_board_without_the_capability_still_gets_todays_sample():
@@ -190,6 +217,25 @@ def test_hall_stuck_fault_shows_in_the_frame_the_board_gets(tmp_path):
     assert list(recorded) == hall
 
 
+def test_bemf_comparator_stuck_shows_in_the_frame_the_board_gets(tmp_path):
+    """bemf_comparator_stuck c at 1 from period 60, lifted at period 150 (duration_s): bit 2 of
+    the comparator word is 1 in between, the reference's elsewhere; the other bits untouched."""
+    names = ("terminal_voltages", "bemf_comparators")
+    mask = mask_of(names)
+    with FakeBoard(capabilities=SENSOR_CAPS, sensor_set=mask) as board:
+        with session(board.url, board_file(tmp_path, names)) as s:
+            s.run_periods(60)
+            injector(s).inject("bemf_comparator_stuck", phase="c", level=1,
+                               duration_s=90 * s.period_s)
+            s.run_periods(PERIODS - 60)
+        rows = received_rows([m for m in board.received if isinstance(m, SampleSensors)])
+    expected = [e["bemf_comparators"] for e in reference_frames(PERIODS, mask)]
+    got = [rows[k]["bemf_comparators"] for k in range(PERIODS)]
+    assert got[:60] == expected[:60] and got[150:] == expected[150:]
+    assert got[60:150] == [e | 0b100 for e in expected[60:150]]
+    assert any(not e & 0b100 for e in expected[60:150])       # the fault changed words
+
+
 def test_hall_stuck_arguments_are_checked_at_the_boundary():
     with FakeBoard(capabilities=SENSOR_CAPS, sensor_set=mask_of(["hall"])) as board:
         with session(board.url) as s:
@@ -213,6 +259,34 @@ def test_exec_board_gets_every_sensor(tmp_path):
         row = {f: g[f] for f in (*ALL_SENSOR_FIELDS, "period", "sensor_set", "status")}
         assert rows.setdefault(g["period"], row) == row
     assert_frames_match(rows, ALL_SENSORS, PERIODS)
+
+
+LIB_SOURCE = Path(__file__).resolve().parent / "data" / "sensor_board_lib.c"
+PROTO_C = Path(__file__).resolve().parents[1] / "protocol" / "c"
+
+
+def test_lib_board_gets_its_set_through_the_c_codec(tmp_path):
+    """A firmware library in this process (lib:) decoding with the reference C codec: the
+    session's Python loop sends SAMPLE_SENSORS through the link tap's C encoder."""
+    import subprocess
+
+    lib = tmp_path / "libsensorboard.so"
+    subprocess.run(["gcc", "-std=c99", "-Wall", "-Wextra", "-Werror", "-shared", "-fPIC",
+                    f"-I{PROTO_C}", "-o", str(lib), str(LIB_SOURCE), str(PROTO_C / "hil_proto.c")],
+                   check=True)
+    names = ("current_b", "vdc", "hall", "terminal_voltages", "bemf_comparators", "resolver")
+    mask = mask_of(names)
+    record = tmp_path / "got.txt"
+    with session(f"lib:{lib}?args=--sensor-set {mask} --record {record}") as s:
+        s.run_periods(PERIODS)
+        assert s.sensor_set == mask
+    lines = [line.split() for line in record.read_text().splitlines()]
+    assert lines and {line[0] for line in lines} == {"SampleSensors"}
+    rows = {}
+    for line in lines:
+        row = dict(zip(("period", "sensor_set", "status", *ALL_SENSOR_FIELDS), map(int, line[1:])))
+        assert rows.setdefault(row["period"], row) == row
+    assert_frames_match(rows, mask, PERIODS)
 
 
 def test_can_board_gets_its_set_segmented():
@@ -311,6 +385,82 @@ def test_plan_naming_a_sensor_the_board_lacks_is_refused_before_the_run(tmp_path
     assert "sample.hall" in text and "'hall'" in text and ":4" in text and "plan.yaml" in text
     with pytest.raises(ConfigError, match="no sensors: list"):
         check_plan_board(plan, load_board(board_file(tmp_path)))
+
+
+def test_readme_lists_the_sensor_set_signals():
+    """test_plans/README.md's "Sensor-set signals" are exactly what plans accept beside the
+    catalogue, with the same units (parsed as test_signal_vocabulary parses "Signals")."""
+    from hil.plans.signals import SENSOR_SET_SIGNALS
+    from tests.test_signal_vocabulary import README, readme_signals
+
+    text = README.read_text().replace("\n## Signals\n", "\n## Catalogue\n")
+    listed = readme_signals(text.replace("\n## Sensor-set signals\n", "\n## Signals\n"))
+    assert listed == SENSOR_SET_SIGNALS
+    assert set(SENSOR_SET_SIGNALS) - {"plant.winding_temperature_degc"} == \
+        {f"sample.{f}" for f in ALL_SENSOR_FIELDS}
+
+
+RUN_PLAN = """name: hall stuck run
+overrides: {initial: {speed_rad_s: 100.0}}
+steps:
+  - wait_until: {signal: sample.hall, comparison: at_least, value: 2, timeout_s: 0.05}
+  - mark: b_on
+  - fault: {name: hall_stuck, sensor: b, level: 0}
+  - run: {duration_s: 0.01}
+  - check:
+      name: Hall word while B is stuck low
+      kind: bound
+      signal: sample.hall
+      window: {from: b_on, offset_s: 0.0001}
+      limits: {low: 1, high: 5, unit: "1"}
+  - check: {name: winding temperature, kind: statistic, statistic: max,
+            signal: plant.winding_temperature_degc, role: finding}
+"""
+
+
+def test_a_plan_waits_on_checks_and_faults_a_sensor_set_signal(tmp_path):
+    """A plan on a sensor-set board: wait_until on sample.hall (read live) ends on the first
+    period Hall B is on; from the next period hall_stuck holds B low, which the reference
+    rotor (no fault) has high there; the plan's checks on sample.* pass."""
+    from hil.plans.outcome import Outcome
+    from hil.run.runner import run_plan
+
+    plan = parse_plan(RUN_PLAN, str(tmp_path / "plan.yaml"))
+    mask = mask_of(HALL_SET)
+    with FakeBoard(capabilities=SENSOR_CAPS, sensor_set=mask) as board:
+        result, signals = run_plan(plan, link=board.url, board=board_file(tmp_path, HALL_SET),
+                                   out_dir=tmp_path / "out", reports=False)
+    assert result.outcome is Outcome.PASS, result.reason
+    t, hall = signals["sample.hall"].t_s, signals["sample.hall"].values.astype(int)
+    period_s = load_profile().control_period_s
+    k_on = int(np.argmax(hall >= 2))
+    # the wait ends once period k_on is done: the mark and the fault at the next period
+    assert k_on > 0 and result.marks["b_on"] == pytest.approx(t[k_on + 1])
+    reference = [e["hall"] for e in reference_frames(len(hall), mask)]
+    assert list(hall[:k_on + 1]) == reference[:k_on + 1]
+    assert all(not h & 0b010 for h in hall[k_on + 1:])
+    assert all(h == r & ~0b010 for h, r in zip(hall[k_on + 1:], reference[k_on + 1:]))
+    assert reference[k_on + 1] & 0b010 and len(hall) * period_s > 0.01
+
+
+def test_limit_formulas_read_the_thermal_model():
+    """A stall plan's limits from the profile's thermal model: thermal.* with degC, K/W, J/K
+    (the winding's steady rise R_th P and its time constant R_th C_th, by hand)."""
+    from hil.plans.formula import FormulaError, evaluate
+    from hil.plans.plan_formulas import profile_values
+
+    values = profile_values(load_profile(overrides={"thermal": {
+        "enabled": True, "thermal_resistance_k_per_w": 1.5, "thermal_capacitance_j_per_k": 40.0,
+        "ambient_degc": 30.0}}))
+    values["copper_loss"] = (12.0, "W")
+    steady = evaluate("thermal.ambient_degc + thermal.thermal_resistance_k_per_w * copper_loss",
+                      values, "degC")
+    assert steady.value == pytest.approx(30.0 + 1.5 * 12.0) and steady.unit == "degC"
+    tau = evaluate("thermal.thermal_resistance_k_per_w * thermal.thermal_capacitance_j_per_k",
+                   values, "s")
+    assert tau.value == pytest.approx(60.0)
+    with pytest.raises(FormulaError, match="adds K and"):
+        evaluate("thermal.ambient_degc + copper_loss", values, "degC")
 
 
 def test_default_sample_log_has_no_sensor_set_channel(tmp_path):

@@ -28,12 +28,12 @@ from fractions import Fraction
 from configfile.dataclass_methods import dataclass
 from hil.plans.units import UnitError, unit as lookup_unit
 
-Dims = tuple[Fraction, Fraction, Fraction, Fraction]     # kg, m, s, A
-_BASE = ("kg", "m", "s", "A")
+Dims = tuple[Fraction, Fraction, Fraction, Fraction, Fraction]     # kg, m, s, A, K
+_BASE = ("kg", "m", "s", "A", "K")
 
 
-def _d(kg: int = 0, m: int = 0, s: int = 0, a: int = 0) -> Dims:
-    return (Fraction(kg), Fraction(m), Fraction(s), Fraction(a))
+def _d(kg: int = 0, m: int = 0, s: int = 0, a: int = 0, k: int = 0) -> Dims:
+    return (Fraction(kg), Fraction(m), Fraction(s), Fraction(a), Fraction(k))
 
 
 NONE = _d()
@@ -44,12 +44,17 @@ DIMENSIONS: dict[str, Dims] = {
     "current": _d(a=1), "voltage": _d(1, 2, -3, -1), "torque": _d(1, 2, -2),
     "flux_linkage": _d(1, 2, -2, -1), "resistance": _d(1, 2, -3, -2),
     "inductance": _d(1, 2, -2, -2), "power": _d(1, 2, -3), "inertia": _d(1, 2),
+    "temperature": _d(k=1),     # degC only: a temperature difference and a temperature alike
 }
 # Units of named values that plans do not write limits in (profile and board parameters).
 _VALUE_UNITS: dict[str, tuple[float, Dims]] = {
     "F": (1.0, _d(-1, -2, 4, 2)),
     "Nm/(rad/s)": (1.0, _d(1, 2, -1)),
     "Nm/rad": (1.0, _d(1, 2, -2)),
+    # the thermal model's (profile `thermal:`)
+    "K/W": (1.0, _d(-1, -2, 3, 0, 1)),
+    "J/K": (1.0, _d(1, 2, -2, 0, -1)),
+    "1/K": (1.0, _d(k=-1)),
 }
 
 
