@@ -19,6 +19,7 @@ test: bootstrap
 	$(MAKE) -s -C protocol/c test
 	$(MAKE) -s -C firmware_stub test
 	$(MAKE) -s -C examples/sixstep test
+	$(MAKE) -s -C examples/bemf_sixstep test
 	$(MAKE) -s -C examples/spec_minimal test
 	$(MAKE) -s -C protocol/c ext-san
 	$(MAKE) -s -C plant_rt/c ext-san
