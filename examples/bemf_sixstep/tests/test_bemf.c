@@ -295,6 +295,67 @@ static void closed_loop_commutes_30_deg_after_each_cross(void **state)
     assert_float_equal(d.speed_rad_s, w_m, 0.02 * w_m);
 }
 
+/* The whole start on a synthetic rotor that follows the field: aligned at
+ * -30 deg, then turning with the ramp's commutation (so every step's cross
+ * falls in its middle), then on at the end speed. The closed loop takes over at
+ * the 6th consecutive step with a cross at the end speed, within
+ * ramp end + (N - 1) .. (N + 1) steps of 60 deg, and then commutates on the
+ * rotor's crosses: 30 deg after each, within a period (1.2 deg at 50 rad/s). */
+static void start_hands_over_after_n_crosses_at_the_end_speed(void **state)
+{
+    (void)state;
+    bemf_config c = test_config();
+    /* longer than the hand-over's N + 1 steps at the end speed (7 x 105 periods) */
+    c.zc_timeout_periods = 800u;
+    bemf_drive d;
+    bemf_drive_enable(&d, &c);
+    bemf_inputs in;
+    memset(&in, 0, sizeof in);
+    in.vdc_v = 24.0f;
+    in.speed_ref_rad_s = 50.0f; /* hold the hand-over speed */
+    const double T = 50e-6, p = 4.0;
+    double theta = -30.0 * DEG, theta_prev = theta;
+    uint32_t handover = 0u, ramp_start = 0u;
+    double worst = 0.0;
+    int closed_commutations = 0;
+    uint8_t last_step = 0u;
+    for (uint32_t k = 0u; k < 6000u; ++k) {
+        double th_sample = 0.5 * (theta + theta_prev); /* a period's average */
+        in.comparators = comparators_at(th_sample);
+        for (int x = 0; x < 3; ++x) {
+            in.terminal_v[x] = 12.0f + (float)emf(x, th_sample);
+        }
+        uint8_t mode_before = d.mode;
+        bemf_output out = bemf_drive_step(&c, &d, &in);
+        assert_int_not_equal(d.mode, BEMF_TRIPPED);
+        if (mode_before == BEMF_ALIGN && d.mode == BEMF_RAMP) {
+            ramp_start = k;
+        }
+        if (mode_before != BEMF_CLOSED && d.mode == BEMF_CLOSED) {
+            handover = k;
+        }
+        if (d.mode == BEMF_CLOSED && out.step != last_step && k > handover) {
+            double ideal = (60.0 * out.step - 150.0) * DEG;
+            worst = fmax(worst, fabs(remainder(theta - ideal, 2.0 * M_PI)) / DEG);
+            closed_commutations++;
+        }
+        last_step = out.step;
+        /* the rotor: still while aligned, then at the ramp's speed (the field's), then held */
+        theta_prev = theta;
+        if (d.mode != BEMF_ALIGN) {
+            double w = d.mode == BEMF_RAMP ? d.ramp.speed_rad_s : c.ramp.ramp_end_rad_s;
+            theta += p * w * T;
+        }
+    }
+    assert_int_equal(ramp_start, c.ramp.align_periods);
+    double t60 = (M_PI / 3.0) / (p * c.ramp.ramp_end_rad_s * T); /* periods */
+    uint32_t ramp_end = ramp_start + c.ramp.ramp_periods;
+    assert_true(handover >= ramp_end + (uint32_t)((c.handover_zero_crosses - 1u) * t60) - 2u);
+    assert_true(handover <= ramp_end + (uint32_t)((c.handover_zero_crosses + 1u) * t60));
+    assert_true(closed_commutations > 20);
+    assert_true(worst <= 1.2 + 0.3);
+}
+
 /* Open loop: align on step 6 for align_periods, then the ramp starts in step 2
  * and commutates every 60 electrical degrees of its speed profile. */
 static void start_aligns_then_ramps(void **state)
@@ -489,6 +550,7 @@ int main(void)
         cmocka_unit_test(timing_commutes_half_an_interval_after_the_cross),
         cmocka_unit_test(closed_loop_commutes_30_deg_after_each_cross),
         cmocka_unit_test(start_aligns_then_ramps),
+        cmocka_unit_test(start_hands_over_after_n_crosses_at_the_end_speed),
         cmocka_unit_test(start_without_crosses_trips_after_the_timeout),
         cmocka_unit_test(closed_loop_without_crosses_trips_after_the_timeout),
         cmocka_unit_test(overcurrent_and_nan_trip),
