@@ -308,7 +308,7 @@ static void run_align(const bemf_config *cfg, bemf_drive *d, const bemf_inputs *
 {
     if (d->tick - d->mode_tick >= cfg->ramp.align_periods) {
         /* the rotor's d-axis sits on the align step's current vector, which is
-         * the start of the step two on: start there */
+         * the start of the step two on: start there (commutate() moves one on) */
         d->mode = BEMF_RAMP;
         d->mode_tick = d->tick;
         d->step = bemf_next_step(cfg->align_step);
@@ -321,14 +321,14 @@ static void run_align(const bemf_config *cfg, bemf_drive *d, const bemf_inputs *
     d->duty = duty_of(2.0f * cfg->resistance_ohm * cfg->align_current_a, in->vdc_v);
 }
 
-static float ramp_interval_ticks(const bemf_config *cfg, float speed_rad_s)
+static float ramp_interval_periods(const bemf_config *cfg, float speed_rad_s)
 {
     return (BEMF_PI / 3.0f) / (speed_rad_s * (float)cfg->pole_pairs * cfg->control_period_s);
 }
 
 static void hand_over(const bemf_config *cfg, bemf_drive *d, bemf_instant zc)
 {
-    float interval = ramp_interval_ticks(cfg, d->ramp.speed_rad_s);
+    float interval = ramp_interval_periods(cfg, d->ramp.speed_rad_s);
     bemf_timing_seed(&d->timing, interval, zc);
     float delay = zc.frac + 0.5f * interval - cfg->zc_lag_periods;
     d->commutate_tick = zc.tick + (delay > 0.0f ? (uint32_t)(delay + 0.5f) : 0u);
@@ -379,7 +379,7 @@ static void run_ramp(const bemf_config *cfg, bemf_drive *d, const bemf_inputs *i
         if (!d->zc.found) {
             d->valid_steps = 0u;
         }
-        commutate(cfg, d, ramp_interval_ticks(cfg, d->ramp.speed_rad_s));
+        commutate(cfg, d, ramp_interval_periods(cfg, d->ramp.speed_rad_s));
     }
     d->speed_rad_s = d->ramp.speed_rad_s;
     /* voltage mode: the back-EMF damps the rotor's swing about the stepping field */
@@ -465,9 +465,7 @@ bemf_output bemf_drive_step(const bemf_config *cfg, bemf_drive *d, const bemf_in
             break;
         }
     }
-    if (d->tick < UINT32_MAX) {
-        d->tick++;
-    }
+    d->tick++; /* wraps after 2.5 days at 50 us: every use is a difference */
     bemf_output out = {0u, 0.0f};
     if ((d->mode == BEMF_ALIGN || d->mode == BEMF_RAMP || d->mode == BEMF_CLOSED) && !d->coasting) {
         out.step = d->step;

@@ -243,7 +243,7 @@ typedef struct {
 typedef struct {
     uint8_t mode;                  /* bemf_mode */
     uint8_t step;                  /* 1..6, 0 with the bridge open */
-    uint32_t tick;                 /* periods since enable */
+    uint32_t tick;                 /* periods since enable (wrapping) */
     uint32_t mode_tick;            /* tick the mode began */
     uint32_t commutate_tick;       /* closed loop: when the next commutation is due */
     uint32_t valid_steps;          /* ramp: consecutive steps with a zero cross */
