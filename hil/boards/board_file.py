@@ -205,9 +205,6 @@ def load_board(path: str | Path) -> BoardFile:
     SchemaChecker(doc).check(BOARD_SCHEMA, data)
     params = _parameters(doc, data.get("parameters") or {})
     sensors = _sensors(doc, data.get("sensors") or ())
-    for sensor in sensors:          # a sensor's scaling: the bench pushes it (SPEC 8)
-        for name in SENSOR_PARAMS.get(sensor, ()):
-            params.setdefault(name, STANDARD_PARAMS[name])
     board = BoardFile(name=data["name"], source=doc.source, parameters=params,
                       capabilities=tuple(data.get("capabilities") or ()),
                       description=data.get("description", ""),
@@ -219,12 +216,6 @@ def load_board(path: str | Path) -> BoardFile:
                      settings=settings, profile_settings=per_profile,
                      capabilities=board.capabilities, description=board.description,
                      sensors=board.sensors)
-
-
-#: The standard parameters of a sensor's scaling, which a board with it in `sensors:` takes.
-SENSOR_PARAMS = {"terminal_voltages": ("terminal_v_per_count",),
-                 "resolver": ("resolver_pole_pairs", "resolver_offset_counts"),
-                 "temperature": ("temperature_degc_per_count", "temperature_offset_counts")}
 
 
 def _sensors(doc: YamlDocument, names) -> tuple[str, ...]:

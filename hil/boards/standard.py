@@ -52,7 +52,6 @@ SPEC_DEFAULTS: dict[str, float] = {
     "vdc_offset_counts": 0,
     "encoder_counts_per_rev": 4096,
     "current_phases": 0,
-    "sensor_set": 0,
     "pole_pairs": 1,
     "stator_resistance_ohm": 0.466,
     "stator_inductance_h": 0.0048,

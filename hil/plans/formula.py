@@ -242,7 +242,7 @@ class _Eval:
                 hint = f"; names in '{group[:-1]}': {', '.join(same)}"
             else:
                 hint = ("; names start with motor., timing., dc_link., inverter., load., "
-                        "sensors., initial., board., or are the plan's constants")
+                        "sensors., initial., thermal., board., or are the plan's constants")
             raise self.err(f"unknown name '{name}'{hint}")
         value, unit_ = self.values[name]
         scale, dims = unit_si(unit_)

@@ -44,6 +44,7 @@ _SUFFIX_UNITS: tuple[tuple[str, str], ...] = (
     ("_rad_s", "rad/s"), ("_rpm", "rpm"), ("_ohm", "ohm"), ("_wb", "Wb"), ("_nm", "Nm"),
     ("_hz", "Hz"), ("_rad", "rad"), ("_counts", "count"), ("_s", "s"), ("_v", "V"),
     ("_a", "A"), ("_h", "H"), ("_f", "F"),
+    ("_k_per_w", "K/W"), ("_j_per_k", "J/K"), ("_per_k", "1/K"), ("_degc", "degC"),
 )
 # The units SPEC 8 writes its parameters in, as formulas read them.
 _SPEC_UNITS = {"N m": "Nm", "N m/(rad/s)": "Nm/(rad/s)", "N m/rad": "Nm/rad", "A/count": "A",
@@ -54,7 +55,7 @@ _NOT_FORMULAS = ("name", "description", "profile", "profiles", "overrides", "lin
                  "mode", "constants")
 _CONSTANT_NAME = re.compile(r"^[a-z][a-z0-9_]*$")
 RESERVED_NAMES = ("timing", "motor", "inverter", "dc_link", "load", "sensors", "initial",
-                  "board", "pi", "sqrt", "min", "max", "abs", "exp", "log")
+                  "thermal", "board", "pi", "sqrt", "min", "max", "abs", "exp", "log")
 
 
 def suffix_unit(key: str) -> str | None:
@@ -77,7 +78,8 @@ def profile_values(profile) -> dict[str, tuple[float, str]]:
             elif isinstance(value, (int, float)) and not isinstance(value, bool):
                 out[name] = (float(value), suffix_unit(f.name) or "1")
 
-    for section in ("timing", "motor", "inverter", "dc_link", "load", "sensors", "initial"):
+    for section in ("timing", "motor", "inverter", "dc_link", "load", "sensors", "initial",
+                    "thermal"):
         walk(getattr(profile, section), section + ".")
     return out
 

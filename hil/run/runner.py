@@ -145,10 +145,11 @@ def board_for(plan: Plan, link: str | None = None, board=None):
     return default_board(link or plan.link or "stub")
 
 
-def check_plan_board(plan: Plan, board) -> None:
+def check_plan_board(plan: Plan, board, profile=None) -> None:
     """Every `param_set` of the plan names a parameter the board takes, with a value in its
     range, and every sensor-set signal it names (``sample.hall``) is one the board's
-    `sensors:` carries: ConfigError naming the plan's file, line and key, before anything runs."""
+    `sensors:` carries: ConfigError naming the plan's file, line and key, before anything runs.
+    `profile`: the run's bench profile (its thermal model logs the winding temperature)."""
     for step in plan.steps:
         if not isinstance(step, ParamSetStep):
             continue
@@ -157,21 +158,21 @@ def check_plan_board(plan: Plan, board) -> None:
             if problem is not None:
                 raise ConfigError(problem, str(plan.source_path), step.line,
                                   f"steps[{step.index}].param_set.{name}")
-    recorded = sensor_set_signals(board)
+    recorded = sensor_set_signals(board, profile)
     for line, key, name in _signal_uses(plan):
         if name in SENSOR_SET_SIGNALS and name not in recorded:
             raise ConfigError(_unrecorded_why(name, board), str(plan.source_path), line, key)
 
 
-def sensor_set_signals(board) -> set[str]:
+def sensor_set_signals(board, profile=None) -> set[str]:
     """The sensor-set signals (hil.plans.signals.SENSOR_SET_SIGNALS) a run on `board` records:
     ``sample.<field>`` of each field of its `sensors:`, and the winding temperature on a
-    board with a sensor set."""
+    board with a sensor set or a profile whose thermal model is on."""
     from hil.boards.sensor_fields import WINDING_TEMPERATURE_SIGNAL, fields_of_set
 
     mask = board.sensor_set
     out = {f"sample.{f}" for f in fields_of_set(mask)}
-    if mask:
+    if mask or (profile is not None and profile.thermal.enabled):
         out.add(WINDING_TEMPERATURE_SIGNAL)
     return out
 
@@ -183,8 +184,9 @@ def _unrecorded_why(name: str, board) -> str:
     has = f"its sensors: [{', '.join(board.sensors)}]" if board.sensors else \
         "it has no sensors: list (today's SAMPLE)"
     if sensor is None:
-        return (f"signal '{name}' is recorded only on a board with a sensor set; board "
-                f"'{board.name}' ({board.source}): {has}")
+        return (f"signal '{name}' is recorded only on a board with a sensor set or a profile "
+                f"whose thermal model is on (thermal.enabled); board '{board.name}' "
+                f"({board.source}): {has}")
     return (f"signal '{name}' needs sensor '{sensor}' in the board's sensor set; board "
             f"'{board.name}' ({board.source}): {has}")
 
@@ -226,7 +228,7 @@ def validate_run(plan: Plan, ref: ProfileRef, link: str | None = None, board=Non
     board_file = board_for(plan, link, board)
     # formulas (limits, stimuli) evaluated for this profile and board, as the run will
     plan = bind_plan(plan, profile, board_file, ref.label)
-    check_plan_board(plan, board_file)
+    check_plan_board(plan, board_file, profile)
     check_control_inputs(plan.steps, ControlLimits.from_profile(profile), str(plan.source_path))
 
 
@@ -440,7 +442,7 @@ def _run(plan: Plan, opts: RunOptions) -> tuple[PlanResult, SignalSet]:
         board = board_for(plan, link, opts.board)
         # the plan's formulas (limits, stimuli) evaluated with this run's profile and board
         plan = bind_plan(plan, profile, board, ref.label)
-        check_plan_board(plan, board)
+        check_plan_board(plan, board, profile)
         # the plan's commands and loads within this profile's ranges, before any period
         check_control_inputs(plan.steps, ControlLimits.from_profile(profile), str(plan.source_path))
         config = SessionConfig(link=link, mode=mode, log_path=log_path, seed=opts.seed,

@@ -242,7 +242,7 @@ class BenchSession:
             self._handshake()
             self._start_sensor_set()
             self._push_parameters(board_parameters(self.profile, self.board,
-                                                   self.profile_label, self.sensor_set))
+                                                   self.profile_label))
         except SessionError as exc:
             self.plant.safe_state()
             self.error = str(exc)
@@ -375,9 +375,13 @@ class BenchSession:
 
     def _start_sensor_set(self) -> None:
         """SPEC 6.13: a board with the SENSOR_SET capability says its set (checked against its
-        board file); it gets SAMPLE_SENSORS from the plant's sensor frame from now on."""
+        board file); it gets SAMPLE_SENSORS from the plant's sensor frame from now on. Its
+        periods, and a SAMPLE board's on a profile whose thermal model is on (the winding
+        temperature logged from Python), run in the Python period loop."""
         self.sensor_set = read_sensor_set(self)
         if self.sensor_set is None:
+            if self.profile.thermal.enabled:    # the winding temperature, logged per period
+                self.sensor_sampler = SensorSampler(self.plant, None, self.recorder)
             return
         self.sensor_sampler = SensorSampler(self.plant, self.sensor_set, self.recorder)
         self._event("sensor_set", {"sensor_set": self.sensor_set,
@@ -641,8 +645,9 @@ class BenchSession:
             run.record_telemetry = run.dispatch
         # A firmware library in this process with the C codec: SAMPLE out and the answers in
         # through one C call while no link fault is active (hil/session/link_tap.py).
-        # A sensor-set board's SAMPLE_SENSORS is made from the plant's Python sensor frame:
-        # this loop sends it (the C exchange and period loop know only SAMPLE).
+        # A sensor-set board's SAMPLE_SENSORS is made from the plant's Python sensor frame, and
+        # the winding temperature is logged from Python: this loop sends and records them (the
+        # C exchange and period loop know only SAMPLE and its rows).
         python_only = self.sensor_sampler is not None
         run.fast = fast = tap.sample_exchanger() if tap is not None and not python_only else None
         # The plain periods in between, each one the C loop (ccodec.exchange_periods: the same

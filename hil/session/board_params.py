@@ -30,40 +30,17 @@ def default_board(link: str | None) -> BoardFile:
 
 
 def board_parameters(profile, board: BoardFile | None = None,
-                     profile_label: str | None = None,
-                     sensor_set: int | None = None) -> list[Setting]:
+                     profile_label: str | None = None) -> list[Setting]:
     """What the session pushes, in order: the required parameters (values from the profile),
-    the scaling of the sensor set's own sensors (SPEC 8: optional for a board, so an UNKNOWN
-    answer is logged and the run goes on; only those its board file takes), then the board's
-    settings. A setting of a required parameter replaces its value at its place (e.g. a board
-    that assumes the nominal current zero and calibrates it itself)."""
+    then the board's settings. A setting of a required parameter replaces its value at its
+    place (e.g. a board that assumes the nominal current zero and calibrates it itself). A
+    sensor set's scaling (TERMINAL_V_PER_COUNT, ...) is not required (SPEC 8.1): a board that
+    takes it lists it in its board file's settings."""
     pushed: dict[str, Setting] = {name: Setting(name, value)
                                   for name, value in required_values(profile).items()}
-    takes = (board or spec_board()).parameters
-    for name, value in sensor_set_values(profile, sensor_set or 0).items():
-        if name in takes:
-            pushed[name] = Setting(name, value, optional=True)
     for setting in (board or spec_board()).settings_for(profile_label):
         pushed[setting.name] = setting
     return list(pushed.values())
-
-
-def sensor_set_values(profile, sensor_set: int) -> dict[str, float]:
-    """SPEC 8's scaling parameters of the sensors in `sensor_set` (terminal voltages, resolver,
-    temperature), from the bench profile's sensors: what the board needs to read them."""
-    from protocol.messages import SENSOR_SET_NAMES
-
-    sensors = profile.sensors
-    out: dict[str, float] = {}
-    if sensor_set & SENSOR_SET_NAMES["terminal_voltages"]:
-        out["terminal_v_per_count"] = float(sensors.terminal.v_per_count)
-    if sensor_set & SENSOR_SET_NAMES["resolver"]:
-        out["resolver_pole_pairs"] = float(sensors.resolver.pole_pairs)
-        out["resolver_offset_counts"] = float(sensors.resolver.offset_counts)
-    if sensor_set & SENSOR_SET_NAMES["temperature"]:
-        out["temperature_degc_per_count"] = float(sensors.temperature.degc_per_count)
-        out["temperature_offset_counts"] = float(sensors.temperature.offset_counts)
-    return out
 
 
 def load_bench_profile(path=None, overrides=None):

@@ -6,7 +6,9 @@ SENSOR_SET (a u16 bit mask in a float32). The session reads it with PARAM_GET un
 waits and tries, refuses an answer that is not a finite integer mask without reserved bits, and
 refuses a board whose set differs from its board file's ``sensors:`` (naming both sets). From
 then on the board gets SAMPLE_SENSORS instead of SAMPLE: the plant's SensorFrame (every sensor
-computed) with only the set's fields, the others 0 as a receiver decodes them.
+computed) with only the set's fields, the others 0 as a receiver decodes them. The same
+sampler logs the plant's winding temperature for a SAMPLE board on a profile whose thermal
+model is on.
 """
 from __future__ import annotations
 
@@ -78,20 +80,26 @@ def _mask(value: float, where: str) -> int:
 class SensorSampler:
     """Every period's SAMPLE_SENSORS for a board whose sensor set is `mask`: the plant's
     SensorFrame with only the set's fields, and the period's rows for the recorder
-    (sample.<field> of the set, the winding temperature)."""
+    (sample.<field> of the set, the winding temperature). `mask` None: a SAMPLE board on a
+    profile whose thermal model is on, for which only the winding temperature is recorded."""
 
-    def __init__(self, plant, mask: int, recorder):
+    def __init__(self, plant, mask: int | None, recorder):
         self.plant = plant
         self.mask = mask
-        self.fields = fields_of_set(mask)
+        self.fields = fields_of_set(mask) if mask is not None else ()
         self.recorder = recorder
         recorder.record_sample_sensors(self.fields, temperature=True)
 
     def __call__(self):
-        """(the plant's sample of the period, its SAMPLE_SENSORS): the sample (the frame's
-        own, not drawn again: what a SAMPLE would have carried) is the recorder's sensor.* row;
-        the period's sample_row (the set's fields, the winding temperature) is recorded."""
+        """(the plant's sample of the period, its SAMPLE_SENSORS, None for a SAMPLE board):
+        the sample (the frame's own, not drawn again: what a SAMPLE would have carried) is the
+        recorder's sensor.* row; the period's sample_row (the set's fields, the winding
+        temperature) is recorded."""
         plant = self.plant
+        if self.mask is None:
+            sample = plant.sample()
+            self.recorder.sample_row(sample.period, (plant.winding_temperature_degc,))
+            return sample, None
         frame = plant.sensor_frame()
         values = {f: getattr(frame, f) for f in self.fields}
         msg = SampleSensors(frame.period, self.mask, frame.status, **values)
