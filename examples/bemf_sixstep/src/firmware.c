@@ -185,7 +185,7 @@ static void set_defaults(bemf_fw *f)
     f->current_offset_counts = 2048.0f;
     f->vdc_v_per_count = 100.0f / 4096.0f;
     f->vdc_offset_counts = 0.0f;
-    f->terminal_v_per_count = 100.0f / 4096.0f;
+    f->terminal_v_per_count = 33.0f / 4096.0f; /* this board's divider: 1:10 into a 3.3 V ADC */
     f->counts_per_rev = 4096u;
     f->current_phases = 0u;
     f->pole_pairs = BEMF_DEFAULT_POLE_PAIRS;
