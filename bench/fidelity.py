@@ -253,12 +253,44 @@ def hardware_plans() -> list[dict]:
             listed = "paper-hardware" in [p.label for p in plan.profiles]
             result, _ = run_plan(plan, out_dir=Path(tmp), reports=False, profile="paper-hardware")
             for c in result.checks:
-                limits = c.limits.describe() if c.limits is not None else ""
+                limits = _limits_text(c.limits) if c.limits is not None else ""
                 if not listed and limits:
                     limits += " (the paper profile's: the plan does not run on this one)"
                 rows.append({"plan": path.stem[:2], "check": c.name, "outcome": c.outcome.value,
-                             "measured": c.measured, "unit": c.unit, "limits": limits})
+                             "measured": c.measured, "unit": c.unit, "limits": limits,
+                             "source": _limits_source(c)})
     return rows
+
+
+def _limits_text(limits) -> str:
+    """Limits.describe() with four significant digits: a formula's value has fifteen."""
+    u = "" if limits.unit == "1" else f" {limits.unit}"
+    if limits.comparison == "outside":
+        text = f"outside {limits.low:.4g} .. {limits.high:.4g}{u}"
+    elif limits.low is not None and limits.high is not None:
+        text = f"{limits.low:.4g} .. {limits.high:.4g}{u}"
+    elif limits.high is not None:
+        text = f"<= {limits.high:.4g}{u}"
+    else:
+        text = f">= {limits.low:.4g}{u}"
+    if limits.marginal:
+        text += f" (marginal within {limits.marginal:.4g}{u})"
+    return text
+
+
+def _limits_source(check) -> str:
+    """Where a check's bounds come from: a formula of the profile and the board (evaluated for
+    this run), a regression bound (measured), an identity (a state or code), or a finding."""
+    if check.limits is None or check.role == "finding":
+        return "finding"
+    if check.role == "regression":
+        return "regression"
+    bounds = [b for b in ("low", "high") if getattr(check.limits, b) is not None]
+    if bounds and all(b in check.formulas for b in bounds):
+        return "formula"
+    if check.limits.low is not None and check.limits.low == check.limits.high:
+        return "identity"
+    return "literal"
 
 
 def plan05_one_error_away() -> dict:
@@ -270,6 +302,7 @@ def plan05_one_error_away() -> dict:
     import yaml
 
     from hil.run.runner import run_plan
+    from hil.session.board_params import default_board
 
     plan = load_plan(PAPER_PLANS[4])
     exact = {"R exact (plant 0.466 ohm)": {"motor": {"resistance_ohm": 0.466}},
@@ -299,10 +332,12 @@ def plan05_one_error_away() -> dict:
 
 
 def plans_table(rows: list[dict]) -> str:
-    lines = ["| plan | check | outcome | measured | limits (paper-hardware) |", "|---|---|---|---|---|"]
+    lines = ["| plan | check | outcome | measured | limits (paper-hardware) | limit is |",
+             "|---|---|---|---|---|---|"]
     for r in rows:
         m = "-" if r["measured"] is None else f"{r['measured']:.4g} {r['unit']}"
-        lines.append(f"| {r['plan']} | {r['check']} | {r['outcome']} | {m} | {r['limits']} |")
+        lines.append(f"| {r['plan']} | {r['check']} | {r['outcome']} | {m} | {r['limits']} | "
+                     f"{r['source']} |")
     return "\n".join(lines)
 
 

@@ -164,8 +164,8 @@ def test_stub_board_declares_what_the_stubs_own_board_file_declares(tmp_path):
 # Five motors, plausible data-sheet values of their class (typical values, no one vendor's):
 # Ke is the line-to-line RMS back-EMF per 1000 rpm, inductance and resistance per phase, the
 # current limit the drive's peak phase current. Each motor runs all four generated plans (the
-# gimbal and drone motors at 5 us, the others at 10 or 50 us: about 20 s for the five).
-ALL_PLANS = ("01_speed_step", "02_steady_state", "03_encoder_loss", "04_dc_sag")
+# gimbal and drone motors at 5 us, the others at 10 or 50 us: 1-2 s a motor in lockstep).
+ALL_PLANS = ("01_speed_step_sensored", "02_steady_state", "03_encoder_loss", "04_dc_sag")
 MOTORS = {
     # the paper's Table 1 motor (the defaults)
     "paper": ([], ALL_PLANS),
@@ -224,7 +224,7 @@ def test_board_option_overrides_the_plans_board(tmp_path):
     options, _ = MOTORS["ebike-hub"]
     project = tmp_path / "hub"
     assert hil_main(["init", str(project), *options]) == 0
-    [record] = _run_plans(project, ["01_speed_step"], tmp_path / "out",
+    [record] = _run_plans(project, ["01_speed_step_sensored"], tmp_path / "out",
                           "--board", str(project / "boards" / "my-firmware.yaml"))
     assert record["extra"]["board_file"]["name"] == "my firmware"
     assert record["outcome"] == "FAIL", record.get("reason")
@@ -234,9 +234,10 @@ def test_board_option_overrides_the_plans_board(tmp_path):
 def test_limits_fail_a_plant_that_is_not_the_nameplate(tmp_path):
     """The servo's project, its profile edited after generation to twice the pole pairs (the
     same flux per pole pair: twice the torque per ampere, half the speed the DC link supports;
-    the board file unchanged). The speed step's limits are formulas of the profile, so they
-    move (the torque limit 3/2 p psi_f I doubles, the ramp halves), but the board's tuning,
-    made for the nameplate, does not follow: the rise time FAILs (not ERROR or TIMEOUT)."""
+    the board file unchanged). The speed step's limits are formulas of the profile and the
+    board file, evaluated for the edited profile (the one-period torque rise in torque_peak
+    doubles with p), but the board's tuning, made for the nameplate, does not follow: the
+    rise time FAILs (not ERROR or TIMEOUT)."""
     options, _ = MOTORS["servo"]
     project = tmp_path / "servo"
     assert hil_main(["init", str(project), "--name", "servo", *options]) == 0
@@ -245,26 +246,27 @@ def test_limits_fail_a_plant_that_is_not_the_nameplate(tmp_path):
     edited = text.replace("  pole_pairs: 4\n", "  pole_pairs: 8\n")
     assert edited != text
     profile.write_text(edited)
-    [record] = _run_plans(project, ["01_speed_step"], tmp_path / "out")
+    [record] = _run_plans(project, ["01_speed_step_sensored"], tmp_path / "out")
     assert record["outcome"] == "FAIL", record.get("reason")
     failed = {c["name"] for c in record["checks"] if c["outcome"] == "FAIL"}
-    assert "rise time 10-90 %" in failed
+    assert "rise time 10-90 % (torque-limited)" in failed
 
 
 def test_a_profile_value_moves_the_derived_limits_in_result_json(tmp_path):
-    """The speed step's rise-time limits are 0.9 .. 2.0 x 0.8 J dw / T_lim with J the profile's:
-    ten times the inertia in profile.yaml (nothing else edited) gives ten times the limits in
-    result.json, with the formula and the profile's inertia among its inputs."""
+    """The speed step's rise-time limits (the standard plan 01's) are 0.8 J dw / torque_peak ..
+    0.8 J dw / T_max / 0.72 with J the profile's: ten times the inertia in profile.yaml
+    (nothing else edited) gives ten times the limits in result.json, with the formula and the
+    profile's inertia among its inputs."""
     options, _ = MOTORS["servo"]
     project = tmp_path / "servo"
     assert hil_main(["init", str(project), "--name", "servo", *options]) == 0
-    plan = [str(project / "plans" / "01_speed_step.yaml")]
+    plan = [str(project / "plans" / "01_speed_step_sensored.yaml")]
 
     def rise(out: str) -> dict:
         hil_main(["run", *plan, "--link", "stub", "--out", str(tmp_path / out), "--no-progress"])
         [path] = (tmp_path / out).glob("**/result.json")
         record = json.loads(path.read_text())
-        return next(c for c in record["checks"] if c["name"] == "rise time 10-90 %")
+        return next(c for c in record["checks"] if c["name"] == "rise time 10-90 % (torque-limited)")
 
     before = rise("before")
     profile = project / "profile.yaml"
@@ -277,13 +279,93 @@ def test_a_profile_value_moves_the_derived_limits_in_result_json(tmp_path):
         assert after["limits"][bound] == pytest.approx(10 * before["limits"][bound], rel=1e-9)
         formula = after["limit_formulas"][bound]
         assert formula["value"] == pytest.approx(after["limits"][bound])
-    inputs = {i["name"]: i for i in after["limit_formulas"]["low"]["inputs"]}
+    inputs = {i["name"]: i for i in after["limit_formulas"]["high"]["inputs"]}
     assert inputs["ramp_time"]["value"] == pytest.approx(
-        10 * {i["name"]: i for i in before["limit_formulas"]["low"]["inputs"]}["ramp_time"]["value"])
-    assert after["limit_formulas"]["low"]["formula"] == "0.9 * 0.8 * ramp_time"
+        10 * {i["name"]: i for i in before["limit_formulas"]["high"]["inputs"]}["ramp_time"]["value"])
+    assert after["limit_formulas"]["high"]["formula"] == "0.8 * ramp_time / 0.72"
     # the constants' own inputs are listed too: the profile's inertia, as the edited file has it
     assert inputs["motor.inertia_kgm2"]["value"] == pytest.approx(0.004)
     assert inputs["motor.inertia_kgm2"]["unit"] == "kgm^2"
+
+
+def test_a_nameplate_value_moves_the_derived_limits_in_result_json(tmp_path):
+    """The nameplate reaches the limits through the board file too: the servo's project with
+    half the current limit gets half the stub's torque_limit_nm (3/2 p psi_f I, written into
+    boards/stub.yaml), so plan 01's torque-limited ramp J dw / T_max, and the rise time's
+    upper limit 0.8 ramp / 0.72 in result.json, are twice as long."""
+    options, _ = MOTORS["servo"]
+    i = options.index("--current-limit-a")
+
+    def rise(name: str, current_a: str) -> dict:
+        project = tmp_path / name
+        assert hil_main(["init", str(project), "--name", name,
+                         *options[:i], "--current-limit-a", current_a, *options[i + 2:]]) == 0
+        [record] = _run_plans(project, ["01_speed_step_sensored"], tmp_path / f"out-{name}")
+        return next(c for c in record["checks"] if c["name"] == "rise time 10-90 % (torque-limited)")
+
+    full, half = rise("full", "20"), rise("half", "10")
+    # (the board file writes 9 significant digits)
+    assert half["limits"]["high"] == pytest.approx(2 * full["limits"]["high"], rel=1e-8)
+    inputs_full = {i["name"]: i["value"] for i in full["limit_formulas"]["high"]["inputs"]}
+    inputs_half = {i["name"]: i["value"] for i in half["limit_formulas"]["high"]["inputs"]}
+    assert inputs_half["board.torque_limit_nm"] == pytest.approx(0.5 * inputs_full["board.torque_limit_nm"],
+                                                                 rel=1e-8)
+
+
+# ------------------------------------------------------------------ the plans hil init writes
+
+def test_the_standard_plans_are_copied_unchanged_but_for_profile_and_board(tmp_path):
+    """plans/01_speed_step_sensored.yaml is test_plans/'s file: the same data but for
+    `profile:` and `board:` (the project's), and a header naming the source."""
+    from hil.cli.init_plans import STANDARD_PLANS
+
+    assert hil_main(["init", str(tmp_path / "bench")]) == 0
+    assert STANDARD_PLANS
+    for rel in STANDARD_PLANS:
+        copy_text = (tmp_path / "bench" / "plans" / Path(rel).name).read_text()
+        assert f"# hil-bench's standard plan test_plans/{rel} " in copy_text.splitlines()[0]
+        copy = yaml.safe_load(copy_text)
+        source = yaml.safe_load((REPO / "test_plans" / rel).read_text())
+        assert copy.pop("profile") == "../profile.yaml" and copy.pop("board") == "../boards/stub.yaml"
+        for key in ("profile", "profiles", "board"):
+            source.pop(key, None)
+        assert copy == source
+        plan = load_plan(tmp_path / "bench" / "plans" / Path(rel).name)
+        assert plan.profile_path == (tmp_path / "bench" / "profile.yaml").resolve()
+        assert plan.board_path == (tmp_path / "bench" / "boards" / "stub.yaml").resolve()
+
+
+def literal_limits_in_project(plans: Path) -> set:
+    """What test_limit_formulas walks test_plans/ for, in a generated project's plans: every
+    acceptance bound that is a number; and every constant written as a number that is not a
+    unit (value 1) nor named *_requirement (a requirement stated as such)."""
+    from tests.test_limit_formulas import literal_acceptance_limits
+
+    found = literal_acceptance_limits([plans], root=plans)
+    for path in plan_files([plans]):
+        for name, raw in (yaml.safe_load(path.read_text()).get("constants") or {}).items():
+            value = raw["value"]
+            if isinstance(value, (int, float)) and value != 1 and not name.endswith("_requirement"):
+                found.add((path.name, f"constant {name}", None))
+    return found
+
+
+def test_generated_plans_have_no_literal_acceptance_limit(tmp_path):
+    """Every acceptance limit hil init writes is a formula of the profile and the board file
+    (or a constant named *_requirement); the walk fails on a limit or a constant written as a
+    number."""
+    project = tmp_path / "bench"
+    assert hil_main(["init", str(project), "--name", "servo", *MOTORS["servo"][0]]) == 0
+    assert literal_limits_in_project(project / "plans") == set()
+    # the walk can fail: a literal limit, and a tolerance not named a requirement
+    plan = project / "plans" / "04_dc_sag.yaml"
+    text = plan.read_text()
+    plan.write_text(text.replace('high: "(1 + speed_tolerance_requirement) * speed"', "high: 1530"))
+    assert literal_limits_in_project(project / "plans") == {
+        ("04_dc_sag.yaml", "speed held through the sag", None)}
+    plan.write_text(text.replace("speed_tolerance_requirement", "speed_tolerance"))
+    assert literal_limits_in_project(project / "plans") == {
+        ("04_dc_sag.yaml", "constant speed_tolerance", None)}
 
 
 # ------------------------------------------------------------------ CI files
@@ -361,3 +443,15 @@ def test_ci_install_and_run_steps_work_in_a_clean_venv(tmp_path):
     record = json.loads(next((project / "out").glob("**/result.json")).read_text())
     assert record["outcome"] == "PASS" and record["link"].startswith("exec:")
     assert (project / "out" / "junit.xml").is_file()
+    # hil init from the installed wheel finds the standard plans (package data) and writes
+    # the same plans as this checkout's
+    installed = tmp_path / "installed"
+    proc = subprocess.run([str(venv / "bin" / "hil"), "init", str(installed)], env=env, cwd=tmp_path,
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    ours = tmp_path / "ours"
+    assert hil_main(["init", str(ours)]) == 0
+    written = sorted(p.name for p in (installed / "plans").iterdir())
+    assert written == sorted(p.name for p in (ours / "plans").iterdir())
+    for name in written:
+        assert (installed / "plans" / name).read_text() == (ours / "plans" / name).read_text(), name

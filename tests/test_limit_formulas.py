@@ -211,14 +211,15 @@ def test_a_sweep_run_sees_its_sampled_profile_in_its_limits(tmp_path):
 LITERAL_ACCEPTANCE_LIMITS: set[tuple[str, str, str | None]] = set()
 
 
-def literal_acceptance_limits(paths) -> set[tuple[str, str, str | None]]:
-    """(plan file, check, profile) of every acceptance bound (low/high) that is a number."""
+def literal_acceptance_limits(paths, root: Path | None = None) -> set[tuple[str, str, str | None]]:
+    """(plan file relative to root, default test_plans/; check; profile) of every acceptance
+    bound (low/high) that is a number."""
     from hil.run.runner import expand_plan_paths
 
     found = set()
     for path in expand_plan_paths(paths):
         plan = load_plan(path)
-        rel = str(Path(path).resolve().relative_to(PLANS))
+        rel = str(Path(path).resolve().relative_to(root or PLANS))
         for check in plan.checks:
             entries = [(None, check.limits, check.role, check.derivations)]
             for label, limits in check.profile_limits.items():

@@ -3,10 +3,12 @@
 From nameplate values (options or a small YAML file) it writes a bench profile (the motor, and
 the control period and sensors scaled to it), a board file for the bench's reference stub on
 that motor (its constants and gains derived from the nameplate: hil.design.stub_tuning), a
-board file to fill in for the user's own firmware, four starter plans whose limits are derived
-from the nameplate (the derivation in each plan's description, as every plan of this project
-has it), CI files for GitHub Actions and GitLab CI, and a README that says how to put the
-firmware in the loop through each link. Every derived value is printed with its formula.
+board file to fill in for the user's own firmware, the plans (hil.cli.init_plans: the standard
+plans that run on any motor, copied to name the project's profile and board file, and starter
+plans for what no portable standard plan covers; every limit a formula of the profile and the
+board file, none a number of the nameplate), CI files for GitHub Actions and GitLab CI, and a
+README that says how to put the firmware in the loop through each link. Every derived value is
+printed with its formula.
 
 Conventions of the inputs (SI units unless the name says otherwise):
 - the back-EMF constant is the line-to-line RMS voltage per 1000 rpm (what most data sheets
@@ -24,6 +26,7 @@ from pathlib import Path
 from configfile.schema import POSITIVE, SchemaChecker, obj
 from configfile.source import ConfigError, load_yaml
 
+from hil.cli.init_plans import project_plans
 from hil.design.stub_tuning import Motor, StubTuning, tune_stub
 
 NAMEPLATE_SCHEMA = obj({
@@ -59,7 +62,8 @@ class Nameplate:
 
 @dataclass
 class Derived:
-    """What the plans' limits are made of; `lines` says how each was computed."""
+    """The nameplate's derived quantities, printed and in the README (`lines` says how each was
+    computed); the plans compute theirs from profile.yaml and the board file."""
 
     psi_wb: float
     ld_h: float
@@ -249,183 +253,6 @@ name: my firmware
 """
 
 
-def _plans(n: Nameplate, d: Derived) -> dict[str, str]:
-    half = 0.5 * n.rated_speed_rpm
-    rated = n.rated_speed_rpm
-    # the speed step's limits are formulas in its plan (the profile's values, evaluated before
-    # each run); the other plans' waits use the nameplate's ramp
-    wait_s = max(0.5, 4.0 * d.ramp_s + 0.3)
-    # Each plan runs on the project's profile and, unless --board says otherwise, on the stub
-    # tuned for the motor: `hil run plans/ --link stub` passes out of the box.
-    common = "profile: ../profile.yaml\nboard: ../boards/stub.yaml\n"
-    derivation = "\n".join("  - " + line for line in d.lines)
-    return {
-        "01_speed_step.yaml": f"""name: {n.name}-speed-step
-description: |
-  Half to rated speed with encoder feedback. Every limit is a formula of the bench profile
-  (profile.yaml: motor.*), the drive's current limit and the constants below, evaluated
-  before each run (hil-bench test_plans/README.md, "Formulas"): change the profile and the
-  limits follow. On this nameplate (`hil init`):
-{derivation}
-  Limits:
-  - rise time 10-90 %: at the torque limit 0.8 of the ramp J dw / T_lim; from 0.9 of that
-    (the limit reached at once) to twice it (a loop that leaves the limit early).
-  - overshoot <= 20 %: a requirement (a speed loop designed for about 50 deg phase margin
-    overshoots 15-20 % on a torque-limited step), not physics; tighten it to your design.
-  - settling to 2 % within five ramps plus 100 ms.
-  - final speed within 1 % of the reference.
-{common}constants:
-  second: {{value: 1, unit: s}}
-  speed_start: {{value: "0.5 * motor.rated_speed_rpm", unit: rpm}}
-  speed_target: {{value: "motor.rated_speed_rpm", unit: rpm}}
-  # the drive's peak phase current (the nameplate's): the torque limit 3/2 p psi_f I follows
-  current_limit: {{value: {_num(d.current_limit_a)}, unit: A}}
-  torque_limit: {{value: "1.5 * motor.pole_pairs * motor.flux_linkage_wb * current_limit", unit: Nm}}
-  # the torque-limited ramp from half to rated speed, J dw / T_lim
-  ramp_time: {{value: "motor.inertia_kgm2 * (speed_target - speed_start) / torque_limit", unit: ms}}
-  settling_limit: {{value: "5 * ramp_time + 0.1 * second", unit: ms}}
-steps:
-  - command: {{enable: true, speed_source: encoder, speed_ref_rpm: speed_start}}
-  - wait_until: {{signal: plant.speed_rpm, comparison: within, value: speed_start,
-                 tolerance: "0.01 * speed_start", unit: rpm, hold_s: 0.02,
-                 timeout_s: "max(0.5 * second, 4 * ramp_time + 0.3 * second)"}}
-  - mark: step
-  - command: {{speed_ref_rpm: speed_target}}
-  - run: {{duration_s: "settling_limit + 0.1 * second"}}
-  - check:
-      name: rise time 10-90 %
-      kind: rise_time
-      signal: plant.speed_rpm
-      window: {{from: step}}
-      initial: {{value: speed_start, unit: rpm}}
-      target: {{value: speed_target, unit: rpm}}
-      limits: {{low: "0.9 * 0.8 * ramp_time", high: "2.0 * 0.8 * ramp_time", unit: ms}}
-  - check:
-      name: overshoot
-      kind: overshoot
-      signal: plant.speed_rpm
-      window: {{from: step}}
-      initial: {{value: speed_start, unit: rpm}}
-      target: {{value: speed_target, unit: rpm}}
-      limits: {{high: 20, unit: "%"}}
-  - check:
-      name: settling within 2 %
-      kind: settling_time
-      signal: plant.speed_rpm
-      window: {{from: step}}
-      initial: {{value: speed_start, unit: rpm}}
-      target: {{value: speed_target, unit: rpm}}
-      band_pct: 2
-      limits: {{high: settling_limit, unit: ms}}
-  - check:
-      name: final speed
-      kind: final_value
-      signal: plant.speed_rpm
-      average_s: 0.05
-      window: {{from: step}}
-      limits: {{low: "0.99 * speed_target", high: "1.01 * speed_target", unit: rpm}}
-""",
-        "02_steady_state.yaml": f"""name: {n.name}-steady-state
-description: |
-  Rated speed ({rated:g} rpm), no load, encoder feedback.
-  Limits (formulas of profile.yaml and the drive's current limit): mean speed within 0.5 %
-  (a speed loop with integral action has no steady error); the torque stays within 10 % of
-  the torque limit 3/2 p psi_f I ({d.torque_limit_nm:.4g} N m on this nameplate; derived:
-{derivation}
-  ).
-{common}constants:
-  speed: {{value: "motor.rated_speed_rpm", unit: rpm}}
-  current_limit: {{value: {_num(d.current_limit_a)}, unit: A}}
-  torque_limit: {{value: "1.5 * motor.pole_pairs * motor.flux_linkage_wb * current_limit", unit: Nm}}
-steps:
-  - command: {{enable: true, speed_source: encoder, speed_ref_rpm: speed}}
-  - wait_until: {{signal: plant.speed_rpm, comparison: within, value: speed, tolerance: "0.01 * speed",
-                 unit: rpm, hold_s: 0.05, timeout_s: {wait_s + 0.5:.3g}}}
-  - mark: steady
-  - run: {{duration_s: 0.1}}
-  - check:
-      name: mean speed
-      kind: statistic
-      statistic: mean
-      signal: plant.speed_rpm
-      window: {{from: steady}}
-      limits: {{low: "0.995 * speed", high: "1.005 * speed", unit: rpm}}
-  - check:
-      name: torque inside the limit
-      kind: statistic
-      statistic: max_abs
-      signal: plant.torque_nm
-      window: {{from: steady}}
-      limits: {{high: "1.1 * torque_limit", unit: Nm}}
-""",
-        "03_encoder_loss.yaml": f"""name: {n.name}-encoder-loss
-description: |
-  The encoder's counter freezes at half speed. Requirement (not physics): the firmware
-  reports FAULT ENCODER_LOSS (code 2, protocol/SPEC.md 9.6) within 20 ms and stops switching;
-  the plant's currents then decay through the diodes within a few L/R = {d.tau_e_s * 1e3:.3g} ms.
-{common}steps:
-  - command: {{enable: true, speed_source: encoder, speed_ref_rpm: {half:g}}}
-  - wait_until: {{signal: plant.speed_rpm, comparison: within, value: {half:g}, tolerance: {0.01 * half:g},
-                 unit: rpm, hold_s: 0.02, timeout_s: {wait_s:.3g}}}
-  - mark: lost
-  - fault: {{name: encoder_lost}}
-  - run: {{duration_s: {0.02 + 10 * d.tau_e_s + 0.02:.3g}}}
-  - check:
-      name: FAULT code is ENCODER_LOSS
-      kind: final_value
-      signal: ctrl.fault_code
-      limits: {{low: 2, high: 2, unit: "1"}}
-  - check:
-      name: detection time
-      kind: settling_time
-      signal: ctrl.fault_code
-      initial: {{value: 0, unit: "1"}}
-      target: {{value: 2, unit: "1"}}
-      band: {{value: 0.5, unit: "1"}}
-      window: {{from: lost}}
-      limits: {{high: 20, unit: ms}}
-  - check:
-      name: currents gone
-      kind: statistic
-      statistic: max_abs
-      signal: plant.i_a
-      window: {{from: lost, offset_s: {0.02 + 8 * d.tau_e_s:.3g}}}
-      limits: {{high: 0.05, unit: A}}
-""",
-        "04_dc_sag.yaml": f"""name: {n.name}-dc-sag
-description: |
-  The DC link sags at half speed to twice the back-EMF's share of the bus, 2 sqrt(3) psi_f p
-  (w_r / 2) / Vdc, within 0.6 .. 0.9 ({d.sag_fraction:.2f} of {n.dc_link_v:g} V on this
-  nameplate). Derived by `hil init`:
-{derivation}
-  Limit: the speed stays within 2 % of the reference through the sag (the bus still holds
-  twice the back-EMF's share); the drive keeps running (no FAULT). The sag and the speeds are
-  formulas of profile.yaml.
-{common}constants:
-  speed: {{value: "0.5 * motor.rated_speed_rpm", unit: rpm}}
-  sag_fraction: {{value: "min(0.9, max(0.6, 2 * sqrt(3) * motor.flux_linkage_wb * motor.pole_pairs * speed / dc_link.source_voltage_v))", unit: "1"}}
-steps:
-  - command: {{enable: true, speed_source: encoder, speed_ref_rpm: speed}}
-  - wait_until: {{signal: plant.speed_rpm, comparison: within, value: speed, tolerance: "0.01 * speed",
-                 unit: rpm, hold_s: 0.02, timeout_s: {wait_s:.3g}}}
-  - mark: sag
-  - dc_link: {{voltage_v: "sag_fraction * dc_link.source_voltage_v", ramp_s: 0.005}}
-  - run: {{duration_s: 0.1}}
-  - check:
-      name: speed held through the sag
-      kind: bound
-      signal: plant.speed_rpm
-      window: {{from: sag}}
-      limits: {{low: "0.98 * speed", high: "1.02 * speed", unit: rpm}}
-  - check:
-      name: no board fault
-      kind: final_value
-      signal: ctrl.fault_code
-      limits: {{low: 0, high: 0, unit: "1"}}
-""",
-    }
-
-
 # Where CI installs hil-bench from: a pip requirement (`hil init --hil-bench SOURCE`). hil-bench
 # is not on PyPI: a wheel built by `pip wheel --no-deps .` in a hil-bench checkout (committed to
 # the project, or on a server), or `hil-bench @ git+https://HOST/OWNER/hil-bench@TAG`. Without
@@ -513,7 +340,7 @@ Written by `hil init`.
 | `profile.yaml` | the plant: your motor on the paper's inverter, with the control period and the sensors scaled to it (set `sensors` to your transducers and ADC) |
 | `boards/stub.yaml` | the bench's reference stub on this motor: its parameters and settings derived from the nameplate (below) |
 | `boards/my-firmware.yaml` | your firmware's board file, to fill in (hil-bench docs/boards.md) |
-| `plans/` | four starter plans whose limits are derived from the nameplate (each plan's description says how) |
+| `plans/` | hil-bench's standard speed step (`01_speed_step_sensored.yaml`, copied: only its `profile:` and `board:` name this project's files) and three starter plans (steady state, encoder loss, DC-link sag); every limit is a formula of `profile.yaml` and the board file, evaluated before each run, and each plan's description says how |
 | `.github/workflows/hil.yml`, `.gitlab-ci.yml` | CI for GitHub Actions and GitLab CI: install hil-bench, build your firmware, run the plans on it, publish the JUnit XML |
 
 ```sh
@@ -525,6 +352,12 @@ hil run plans/ --link exec:path/to/your-firmware --board boards/my-firmware.yaml
 Each plan names `board: ../boards/stub.yaml`, so on the stub's links it runs the stub with the
 settings derived here. `--board FILE` overrides a plan's board: with your firmware give your
 board file (as the CI files do); without it, your firmware would be sent the stub's settings.
+
+The plans' limits read the board file's settings (`board.torque_limit_nm`,
+`board.speed_kp_nm_per_rad_s`, `board.overcurrent_a`, ...; the report and `result.json` list
+every input of every limit). With your board file they are your firmware's settings where it
+gives them, else SPEC 8.1's defaults (the paper's drive): give your drive's torque limit,
+speed-loop gains and trip level in `boards/my-firmware.yaml`'s settings.
 
 ## Derived from the nameplate
 
@@ -638,7 +471,7 @@ def init_command(args) -> int:
     files = {"profile.yaml": _profile(n, d), "README.md": _readme(n, d, source),
              "boards/stub.yaml": _stub_board(n, d), "boards/my-firmware.yaml": _my_board(n, d),
              ".github/workflows/hil.yml": _github(source), ".gitlab-ci.yml": _gitlab(source)}
-    files.update({f"plans/{name}": text for name, text in _plans(n, d).items()})
+    files.update({f"plans/{name}": text for name, text in project_plans().items()})
     for rel, text in files.items():
         path = target / rel
         path.parent.mkdir(parents=True, exist_ok=True)

@@ -184,8 +184,9 @@ def _parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     if only in (None, "init"):
         init = sub.add_parser("init", help="scaffold a bench project for your motor and firmware",
                               description="Write a bench profile from nameplate values, a board file "
-                                          "for the stub tuned to the motor, starter plans with limits "
-                                          "derived from them, CI files and a README (docs/init.md).")
+                                          "for the stub tuned to the motor, the standard plans that run on "
+                                          "any motor and starter plans (limits as formulas of the profile "
+                                          "and the board file), CI files and a README (docs/init.md).")
         # init's options come from hil.cli.init (its nameplate dataclass), imported only when the
         # command line can be `hil init ...`: no other command parses them or shows them in --help.
         if "init" in words:
