@@ -15,12 +15,14 @@ bootstrap-run:
 run: bootstrap-run
 	.venv/bin/hil run test_plans/ --out $(OUT)
 	.venv/bin/hil run examples/hall_sixstep/plans --link lib:examples/hall_sixstep/build/libhall_sixstep.so --out $(OUT)/hall_sixstep
+	.venv/bin/hil run examples/bemf_sixstep/plans --link lib:examples/bemf_sixstep/build/libbemf_sixstep.so --out $(OUT)/bemf_sixstep
 
 test: bootstrap
 	$(MAKE) -s -C protocol/c test
 	$(MAKE) -s -C firmware_stub test
 	$(MAKE) -s -C examples/sixstep test
 	$(MAKE) -s -C examples/hall_sixstep test
+	$(MAKE) -s -C examples/bemf_sixstep test
 	$(MAKE) -s -C examples/spec_minimal test
 	$(MAKE) -s -C protocol/c ext-san
 	$(MAKE) -s -C plant_rt/c ext-san

@@ -146,6 +146,7 @@ make -s -C plant_rt/c
 make -s -C firmware_stub
 # The example boards' firmware libraries: `make run` runs their plans over lib: (gcc only).
 make -s -C examples/hall_sixstep lib
+make -s -C examples/bemf_sixstep lib
 # Byte-code for the bench's own packages, as a non-editable pip install would write it: a
 # shell that sets PYTHONDONTWRITEBYTECODE (this CI machine's does) otherwise compiles every
 # module on every `hil run`, 0.08 s of its start-up (python -m bench session: hil_run_startup).
