@@ -62,6 +62,7 @@ class FaultCode(IntEnum):
     WATCHDOG = 4
     PROTOCOL = 5
     NON_FINITE = 6
+    STALL = 7  # no commutation event under torque demand: locked rotor, lost synchronisation
 
 
 class NonFiniteQuantity(IntEnum):
@@ -118,6 +119,7 @@ class ParamId(IntEnum):
     TELEMETRY_DIVIDER = 40
     OVERCURRENT_A = 41
     ENCODER_LOSS_TIMEOUT_S = 42
+    STALL_TIMEOUT_S = 43  # no commutation event under torque demand for this long trips FAULT STALL
     CONTROL_STEP_CYCLES = 50  # read-only: cycles of the last control step on target
     CONTROL_LAW = 60  # 0: DTC (answers GATES), 1: FOC (answers DUTY)
     CURRENT_BANDWIDTH_HZ = 61  # FOC d-q current loop bandwidth

@@ -28,5 +28,12 @@ def test_non_finite_with_a_value_that_codes_nothing(value):
     assert _fault_text(Fault(7, 6, value), PERIOD_S).endswith("(unknown quantity)")
 
 
+def test_stall_is_named_with_its_seconds():
+    """Code 7 (SPEC 9.6): a locked rotor reads STALL with the seconds without a commutation
+    event, not ENCODER_LOSS."""
+    assert _fault_text(Fault(5001, int(FaultCode.STALL), 0.05), PERIOD_S) == (
+        "period 5001 (t = 0.25005 s): board FAULT 7 STALL, value 0.05 s")
+
+
 def test_an_unknown_code_is_named_unknown():
-    assert "board FAULT 7 UNKNOWN, value 1" in _fault_text(Fault(7, 7, 1.0), PERIOD_S)
+    assert "board FAULT 8 UNKNOWN, value 1" in _fault_text(Fault(7, 8, 1.0), PERIOD_S)

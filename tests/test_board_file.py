@@ -86,6 +86,9 @@ def test_a_board_file_may_take_the_sensor_set_parameters(tmp_path):
     ("name: b\ncapabilities: [GATES, PWM]\n", 2, "capabilities[1]", "expected one of"),
     ("name: b\nparameters:\n  standard: [resolver_pole_pairs]\nsettings:\n  resolver_pole_pairs: 0\n", 5,
      "settings.resolver_pole_pairs", "below its minimum 1"),
+    # STALL_TIMEOUT_S (SPEC 8, id 43) must be > 0: a zero timeout would trip at once
+    ("name: b\nparameters:\n  standard: [stall_timeout_s]\nsettings:\n  stall_timeout_s: 0\n", 5,
+     "settings.stall_timeout_s", "below its minimum"),
     ("name: b\nparameters:\n  standard: [sensor_set]\nsettings:\n  sensor_set: 3\n", 5,
      "settings.sensor_set", "read-only"),
     ("parameters: {}\n", 1, None, "missing required key 'name'"),

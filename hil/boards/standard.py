@@ -75,6 +75,7 @@ SPEC_DEFAULTS: dict[str, float] = {
     "telemetry_divider": 10,
     "overcurrent_a": 20,
     "encoder_loss_timeout_s": 0.01,
+    "stall_timeout_s": 0.05,
     "control_step_cycles": 0,
 }
 
@@ -124,6 +125,9 @@ STANDARD_PARAMS: dict[str, ParamSpec] = {p.name: p for p in (
     _std("overcurrent_a", 41, "A", "phase-current trip level (FAULT 1)", minimum=0),
     _std("encoder_loss_timeout_s", 42, "s", "encoder silence while running that trips FAULT 2",
          minimum=0),
+    # > 0: a zero timeout would trip on the first period without a commutation event
+    _std("stall_timeout_s", 43, "s", "no commutation event under torque demand that trips FAULT 7",
+         minimum=1e-6),
     _std("control_step_cycles", 50, "cycle", "CPU cycles of the last control step (read-only)",
          read_only=True),
 )}

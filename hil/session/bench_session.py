@@ -1080,7 +1080,7 @@ def _ns_text(period_s: float) -> str:
     return f"{round(period_s * 1e9)} ns" if math.isfinite(period_s) else f"{period_s} s"
 
 
-_FAULT_UNITS = {1: "A", 2: "s", 3: "V", 4: "s"}
+_FAULT_UNITS = {1: "A", 2: "s", 3: "V", 4: "s", 7: "s"}
 
 
 def _fault_text(msg: Fault, period_s: float) -> str:

@@ -117,7 +117,8 @@ typedef enum {
     HIL_FAULT_DC_LINK = 3,
     HIL_FAULT_WATCHDOG = 4,
     HIL_FAULT_PROTOCOL = 5,
-    HIL_FAULT_NON_FINITE = 6
+    HIL_FAULT_NON_FINITE = 6,
+    HIL_FAULT_STALL = 7 /* no commutation event under torque demand: locked rotor, lost synchronisation */
 } hil_fault_code;
 /* FAULT NON_FINITE: the quantity that was NaN or infinite, as the FAULT's value (SPEC.md 9.6) */
 typedef enum {
@@ -168,6 +169,7 @@ typedef enum {
     HIL_PARAM_TELEMETRY_DIVIDER = 40,
     HIL_PARAM_OVERCURRENT_A = 41,
     HIL_PARAM_ENCODER_LOSS_TIMEOUT_S = 42,
+    HIL_PARAM_STALL_TIMEOUT_S = 43,     /* no commutation event under torque demand for this long trips FAULT STALL */
     HIL_PARAM_CONTROL_STEP_CYCLES = 50, /* read-only: cycles of the last control step on target (SysTick) */
     HIL_PARAM_CONTROL_LAW = 60,         /* 0: DTC (the paper's, answers GATES), 1: FOC (answers DUTY) */
     HIL_PARAM_CURRENT_BANDWIDTH_HZ = 61, /* FOC d-q current loop bandwidth */
