@@ -58,8 +58,8 @@ def test_example_image_passes_its_plans_under_qemu(tmp_path):
 
 def test_the_start_fails_when_the_comparators_cannot_see_the_back_emf(tmp_path):
     """Offsets of 1.5 V, above the 1.2 V phase back-EMF at the ramp's end speed (50 rad/s x
-    4 pole pairs x 6 mWb): phases a and b never cross, no hand-over, the board trips (desync)
-    and the plan does not pass."""
+    4 pole pairs x 6 mWb): phases a and b never cross, no hand-over, the board trips (FAULT 7
+    STALL: the rotor does not follow the drive) and the plan does not pass."""
     profile = tmp_path / "offsets.yaml"
     text = (EXAMPLE / "profiles" / "bldc.yaml").read_text()
     assert "comparator_offset_v: [0.02, -0.015, 0.01]" in text
@@ -69,4 +69,4 @@ def test_the_start_fails_when_the_comparators_cannot_see_the_back_emf(tmp_path):
                             tmp_path / "out", "--profile", str(profile))
     assert proc.returncode != 0, proc.stdout + proc.stderr
     assert [r["outcome"] for r in results] == ["FAIL"]
-    assert "ENCODER_LOSS" in results[0]["reason"]
+    assert "STALL" in results[0]["reason"]

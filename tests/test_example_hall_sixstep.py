@@ -44,8 +44,10 @@ def test_example_passes_its_plans_over_exec(tmp_path):
     assert len(results) == len(list(PLANS.glob("*.yaml"))) == 5
     assert all(r["outcome"] == "PASS" for r in results), [(r["plan"], r["reason"]) for r in results]
     assert {r["link"] for r in results} == {link}
-    # the two fault plans saw the board's FAULT 2 (position sensor lost: an illegal Hall word, a stall)
+    # the two fault plans saw the board's two faults: FAULT 2 for the illegal Hall word (the
+    # position sensor lost), FAULT 7 for the locked rotor (the rotor does not follow the drive)
     assert "board FAULT 2 ENCODER_LOSS" in proc.stdout + proc.stderr
+    assert "board FAULT 7 STALL" in proc.stdout + proc.stderr
 
 
 @pytest.mark.skipif(not HAVE_QEMU, reason="qemu-system-arm / gcc-arm-none-eabi not installed "

@@ -94,7 +94,7 @@ typedef struct {
     uint8_t ki_overridden;
     uint32_t telemetry_divider;
     float overcurrent_a;
-    float zc_timeout_s;       /* ENCODER_LOSS_TIMEOUT_S: here the position feedback is the zero crosses */
+    float zc_timeout_s;       /* STALL_TIMEOUT_S: no zero cross this long under drive trips FAULT STALL */
     float align_time_s;
     float align_current_a;
     float ramp_start_rad_s;
@@ -292,7 +292,7 @@ static uint8_t param_set(bemf_fw *f, uint16_t id, float v)
         if (!(v > 0.0f && v < 1000.0f)) return HIL_PARAM_OUT_OF_RANGE;
         f->overcurrent_a = v;
         break;
-    case HIL_PARAM_ENCODER_LOSS_TIMEOUT_S:
+    case HIL_PARAM_STALL_TIMEOUT_S:
         if (!(v > 0.0f && v <= 10.0f)) return HIL_PARAM_OUT_OF_RANGE;
         f->zc_timeout_s = v;
         break;
@@ -368,7 +368,7 @@ static uint8_t param_get(const bemf_fw *f, uint16_t id, float *v)
     case HIL_PARAM_SPEED_KI_NM_PER_RAD: *v = f->speed_ki; break;
     case HIL_PARAM_TELEMETRY_DIVIDER: *v = (float)f->telemetry_divider; break;
     case HIL_PARAM_OVERCURRENT_A: *v = f->overcurrent_a; break;
-    case HIL_PARAM_ENCODER_LOSS_TIMEOUT_S: *v = f->zc_timeout_s; break;
+    case HIL_PARAM_STALL_TIMEOUT_S: *v = f->zc_timeout_s; break;
     case PARAM_ALIGN_TIME_S: *v = f->align_time_s; break;
     case PARAM_ALIGN_CURRENT_A: *v = f->align_current_a; break;
     case PARAM_RAMP_START_RAD_S: *v = f->ramp_start_rad_s; break;
@@ -530,7 +530,9 @@ static void on_sample_sensors(bemf_fw *f, const hil_sample_sensors *s)
     if (f->state == HIL_STATE_RUNNING || f->state == HIL_STATE_STARTING) {
         out = bemf_drive_step(&f->cfg, &f->drive, &in);
         if (f->drive.mode == BEMF_TRIPPED) {
-            uint16_t code = f->drive.trip == BEMF_TRIP_OVERCURRENT ? HIL_FAULT_OVERCURRENT : HIL_FAULT_ENCODER_LOSS;
+            /* no zero cross in time (desync, locked rotor, failed start): the rotor does not
+             * follow the drive, SPEC.md 9.6 STALL */
+            uint16_t code = f->drive.trip == BEMF_TRIP_OVERCURRENT ? HIL_FAULT_OVERCURRENT : HIL_FAULT_STALL;
             trip(f, code, f->drive.trip_value, s->period);
             out.step = 0u;
         } else if (f->drive.mode == BEMF_CLOSED && f->state == HIL_STATE_STARTING) {

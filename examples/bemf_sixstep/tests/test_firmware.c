@@ -203,11 +203,14 @@ static void hello_and_the_sensor_set_parameter(void **state)
     static const struct { uint16_t id; float v; } pushed[] = {
         {1, 50e-6f}, {2, 0.01220703125f}, {3, 2048.0f}, {7, 0.0f}, {4, 0.0244140625f},
         {5, 0.0f}, {6, 4096.0f}, {10, 4.0f}, {40, 1.0f}, {11, 0.25f}, {12, 0.3e-3f},
-        {13, 0.006f}, {14, 0.0244140625f}, {23, 0.24f}, {42, 0.02f}};
+        {13, 0.006f}, {14, 0.0244140625f}, {23, 0.24f}, {43, 0.02f}};
     for (size_t i = 0; i < sizeof pushed / sizeof pushed[0]; ++i) {
         set_param(fw, pushed[i].id, pushed[i].v, HIL_PARAM_OK);
     }
-    set_param(fw, 42, NAN, HIL_PARAM_OUT_OF_RANGE);
+    set_param(fw, HIL_PARAM_STALL_TIMEOUT_S, NAN, HIL_PARAM_OUT_OF_RANGE);
+    set_param(fw, HIL_PARAM_STALL_TIMEOUT_S, 0.0f, HIL_PARAM_OUT_OF_RANGE); /* > 0 (SPEC.md 8) */
+    /* no encoder: the stall timeout is STALL_TIMEOUT_S, not ENCODER_LOSS_TIMEOUT_S */
+    set_param(fw, HIL_PARAM_ENCODER_LOSS_TIMEOUT_S, 0.02f, HIL_PARAM_UNKNOWN);
     set_param(fw, HIL_PARAM_FLUX_BAND_WB, 1.0f, HIL_PARAM_UNKNOWN);
     hil_fw_destroy(fw);
 }
@@ -285,12 +288,49 @@ static void sample_sensors_drive_the_align_step(void **state)
     hil_fw_destroy(fw);
 }
 
+/* A locked rotor: no back-EMF, the comparators hold their offsets' word, no zero cross ever
+ * comes. With a 1 ms align, a 1 ms ramp and a 2 ms STALL_TIMEOUT_S the start fails with FAULT 7
+ * STALL (not 2: no position sensor failed, the rotor does not follow the drive), value the
+ * seconds at the end speed without the hand-over, and the bridge opens. */
+static void locked_rotor_start_trips_stall(void **state)
+{
+    (void)state;
+    void *fw = new_fw();
+    hil_msg out[8];
+    set_param(fw, 100u, 0.001f, HIL_PARAM_OK); /* align_time_s: 20 periods */
+    set_param(fw, 104u, 0.001f, HIL_PARAM_OK); /* ramp_time_s: 20 periods */
+    set_param(fw, HIL_PARAM_STALL_TIMEOUT_S, 0.002f, HIL_PARAM_OK); /* 40 periods */
+    command(fw, HIL_CMD_ENABLE, 200.0f, out);
+    assert_int_equal(out[0].u.status.state, HIL_STATE_STARTING);
+    /* at rest: the three terminals read alike (no back-EMF) and the comparators hold their
+     * offsets' word, a 0, b 1, c 0 */
+    sensors s = {1u, BOARD_SET, 0u, 2048u, 2048u, 2048u, 983u /* 24.0 V */, 1000u, 1000u, 1000u, 0x02u};
+    int n = 0;
+    for (; s.period < 1000u; ++s.period) {
+        n = send_sensors(fw, &s, out, 8);
+        if (n >= 1 && out[0].type == HIL_MSG_FAULT) break;
+    }
+    assert_true(s.period < 1000u);
+    assert_int_equal(out[0].u.fault.code, HIL_FAULT_STALL);
+    /* the trip comes once the end speed was held longer than the timeout: value > 2 ms,
+     * within a few periods of it */
+    assert_true(out[0].u.fault.value > 0.002f);
+    assert_true(out[0].u.fault.value < 0.002f + 3.0f * 50e-6f);
+    assert_true(s.period > 20u + 20u + 40u);
+    assert_int_equal(out[1].type, HIL_MSG_STATUS);
+    assert_int_equal(out[1].u.status.state, HIL_STATE_FAULT);
+    assert_int_equal(out[2].type, HIL_MSG_DUTY_LEGS);
+    assert_int_equal(out[2].u.duty_legs.leg_enable, 0u);
+    hil_fw_destroy(fw);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(abi_version_and_create_refusals),
         cmocka_unit_test(hello_and_the_sensor_set_parameter),
         cmocka_unit_test(sample_sensors_drive_the_align_step),
+        cmocka_unit_test(locked_rotor_start_trips_stall),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

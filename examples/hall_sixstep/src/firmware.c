@@ -59,7 +59,7 @@ typedef struct {
     float magnet_flux_wb;
     uint32_t telemetry_divider;
     float overcurrent_a;
-    float stall_timeout_s; /* parameter ENCODER_LOSS_TIMEOUT_S: Hall silence under torque demand */
+    float stall_timeout_s; /* parameter STALL_TIMEOUT_S: Hall silence under torque demand */
     uint8_t kp_overridden; /* PARAM_SET of the gains replaces the bandwidth design */
     uint8_t ki_overridden;
     /* derived from the parameters (derive()) */
@@ -205,8 +205,9 @@ static uint8_t param_set(hs_fw *f, uint16_t id, float v)
         if (!(v > 0.0f && v < 1000.0f)) return HIL_PARAM_OUT_OF_RANGE;
         f->overcurrent_a = v;
         break;
-    case HIL_PARAM_ENCODER_LOSS_TIMEOUT_S:
-        if (!(v >= 0.0f && v <= 10.0f)) return HIL_PARAM_OUT_OF_RANGE;
+    case HIL_PARAM_STALL_TIMEOUT_S:
+        /* > 0 (SPEC.md 8): a zero timeout would trip on the first sample without an edge */
+        if (!(v > 0.0f && v <= 10.0f)) return HIL_PARAM_OUT_OF_RANGE;
         f->stall_timeout_s = v;
         break;
     default:
@@ -236,7 +237,7 @@ static uint8_t param_get(const hs_fw *f, uint16_t id, float *v)
     case HIL_PARAM_SPEED_KI_NM_PER_RAD: *v = f->speed_gains.ki_nm_per_rad; break;
     case HIL_PARAM_TELEMETRY_DIVIDER: *v = (float)f->telemetry_divider; break;
     case HIL_PARAM_OVERCURRENT_A: *v = f->overcurrent_a; break;
-    case HIL_PARAM_ENCODER_LOSS_TIMEOUT_S: *v = f->stall_timeout_s; break;
+    case HIL_PARAM_STALL_TIMEOUT_S: *v = f->stall_timeout_s; break;
     default:
         *v = 0.0f;
         return HIL_PARAM_UNKNOWN;
@@ -412,9 +413,9 @@ static void on_sample_sensors(hs_fw *f, const hil_sample_sensors *s)
         }
         if (hs_stall_watch_step(&f->stall_watch, edge, p.torque_ref_nm, f->speed_gains.torque_limit_nm,
                                 f->stall_timeout_periods)) {
-            /* no Hall edge under torque: stalled (SPEC.md 9.6 ENCODER_LOSS, value: the seconds
-             * since the last Hall edge) */
-            trip(f, HIL_FAULT_ENCODER_LOSS, (float)f->stall_watch.silent_periods * dt, s->period);
+            /* no Hall edge under torque: the rotor does not follow the drive (SPEC.md 9.6
+             * STALL, value: the seconds since the last Hall edge); the sensor itself works */
+            trip(f, HIL_FAULT_STALL, (float)f->stall_watch.silent_periods * dt, s->period);
         }
     }
     if (f->state == HIL_STATE_RUNNING && p.sector != 0u) {

@@ -241,7 +241,7 @@ static void hello_declares_the_sensor_set(void **state)
     static const struct { uint16_t id; float v; } pushed[] = {
         {1, 50e-6f}, {2, 0.01220703125f}, {3, 2048.0f}, {7, 0.0f}, {4, 0.0244140625f}, {5, 0.0f},
         {6, 4096.0f}, {10, 4.0f}, {40, 1.0f}, {11, 0.25f}, {12, 0.3e-3f}, {13, 0.006f}, {23, 0.3f},
-        {24, 5.0e-3f}, {25, 0.3f}, {41, 15.0f}, {42, 0.05f}};
+        {24, 5.0e-3f}, {25, 0.3f}, {41, 15.0f}, {43, 0.05f}};
     for (size_t i = 0; i < sizeof pushed / sizeof pushed[0]; ++i) {
         param(fw, HIL_MSG_PARAM_SET, pushed[i].id, pushed[i].v, &a);
         assert_int_equal(a.u.param_value.status, HIL_PARAM_OK);
@@ -251,6 +251,15 @@ static void hello_declares_the_sensor_set(void **state)
     assert_int_equal(a.u.param_value.status, HIL_PARAM_OUT_OF_RANGE);
     assert_true(a.u.param_value.value == 4.0f);
     param(fw, HIL_MSG_PARAM_GET, HIL_PARAM_FLUX_BAND_WB, 0.0f, &a); /* a DTC parameter it has not */
+    assert_int_equal(a.u.param_value.status, HIL_PARAM_UNKNOWN);
+    /* the stall timeout is STALL_TIMEOUT_S (43), > 0; no encoder, so no ENCODER_LOSS_TIMEOUT_S (42) */
+    param(fw, HIL_MSG_PARAM_GET, HIL_PARAM_STALL_TIMEOUT_S, 0.0f, &a);
+    assert_int_equal(a.u.param_value.status, HIL_PARAM_OK);
+    assert_true(a.u.param_value.value == 0.05f);
+    param(fw, HIL_MSG_PARAM_SET, HIL_PARAM_STALL_TIMEOUT_S, 0.0f, &a);
+    assert_int_equal(a.u.param_value.status, HIL_PARAM_OUT_OF_RANGE);
+    assert_true(a.u.param_value.value == 0.05f);
+    param(fw, HIL_MSG_PARAM_GET, HIL_PARAM_ENCODER_LOSS_TIMEOUT_S, 0.0f, &a);
     assert_int_equal(a.u.param_value.status, HIL_PARAM_UNKNOWN);
     hil_fw_destroy(fw);
 }
@@ -341,14 +350,16 @@ static void illegal_hall_word_trips_encoder_loss(void **state)
     }
 }
 
-/* No Hall edge while the speed PI asks for the torque limit: FAULT 2 after the
- * timeout (parameter 42), on the (timeout + 1)-th silent period. */
+/* No Hall edge while the speed PI asks for the torque limit: FAULT 7 STALL (not 2: the
+ * sensor works, the rotor does not turn) after the timeout (parameter 43), on the
+ * (timeout + 1)-th silent period. */
 static void locked_rotor_trips_after_the_stall_timeout(void **state)
 {
     (void)state;
     void *fw = new_fw();
     hil_msg a, out[8];
-    param(fw, HIL_MSG_PARAM_SET, HIL_PARAM_ENCODER_LOSS_TIMEOUT_S, 0.001f, &a); /* 20 periods */
+    param(fw, HIL_MSG_PARAM_SET, HIL_PARAM_STALL_TIMEOUT_S, 0.001f, &a); /* 20 periods */
+    assert_int_equal(a.u.param_value.status, HIL_PARAM_OK);
     hello_and_enable(fw, 200.0f);
     for (uint32_t k = 1u; k <= 20u; ++k) {
         sensors s = at_rest(k, 1u);
@@ -358,7 +369,7 @@ static void locked_rotor_trips_after_the_stall_timeout(void **state)
     sensors s = at_rest(21u, 1u);
     assert_int_equal(sample(fw, &s, out, 8), 4);
     assert_int_equal(out[0].type, HIL_MSG_FAULT);
-    assert_int_equal(out[0].u.fault.code, HIL_FAULT_ENCODER_LOSS);
+    assert_int_equal(out[0].u.fault.code, HIL_FAULT_STALL);
     assert_float_equal(out[0].u.fault.value, 21.0f * 50e-6f, 1e-7f);
     assert_int_equal(out[2].u.duty_legs.leg_enable, 0u);
     /* disable clears it (SPEC.md 2.5), enable runs again */
