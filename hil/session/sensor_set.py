@@ -53,7 +53,7 @@ def read_sensor_set(session) -> int | None:
     if answer.status != 0:
         raise SessionError(f"{where} advertises SENSOR_SET but refused PARAM_GET of parameter "
                            f"sensor_set (id {SENSOR_SET_ID}, status {answer.status})")
-    mask = _mask(answer.value, where)
+    mask = sensor_set_of_answer(answer.value, where)
     if wanted and mask != wanted:
         raise SessionError(f"{where} reads sensors {names_text(mask)} (parameter sensor_set = "
                            f"0x{mask:04x}), its board file {board.source} says sensors: "
@@ -61,8 +61,9 @@ def read_sensor_set(session) -> int | None:
     return mask
 
 
-def _mask(value: float, where: str) -> int:
-    """SENSOR_SET's float32 as its u16 mask; SessionError naming the parameter otherwise."""
+def sensor_set_of_answer(value: float, where: str) -> int:
+    """SENSOR_SET's float32 as its u16 mask; SessionError naming the parameter otherwise (the
+    session and `hil probe` both check it here)."""
     if not math.isfinite(value):
         raise SessionError(f"{where} answered parameter sensor_set (id {SENSOR_SET_ID}) with a "
                            f"non-finite value ({value!r})")
