@@ -295,22 +295,7 @@ class Network:
                 if kinds[x] == H or kinds[x] == N:
                     idc += cur[x]
             vdc = dc.voltage(v, idc)
-            ud = self.ud
-            vt = [0.0, 0.0, 0.0]
-            for x in range(3):
-                k = kinds[x]
-                if k == H or k == L:
-                    drop = 0.0
-                    if ud:
-                        z = cur[x] / self.knee
-                        drop = ud * (1.0 if z > 1.0 else -1.0 if z < -1.0 else z)
-                    vt[x] = (vdc if k == H else 0.0) - drop
-                elif k == P:
-                    vt[x] = -ud
-                elif k == N:
-                    vt[x] = vdc + ud
-            va = (2.0 * vt[0] - vt[1] - vt[2]) / 3.0
-            vb = (vt[1] - vt[2]) * INV_SQRT3
+            va, vb = self._terminal_ab(kinds, cur, vdc)
             if self.zero:
                 ex0, ex1 = PHASE_AXES[self.zero[0]]
                 did = (c * va + s * vb - r * i_d + we * pq) * ild
