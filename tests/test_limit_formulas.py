@@ -258,6 +258,25 @@ def test_regression_bounds_say_what_was_measured():
                     assert "measured" in note.lower(), (path, check.name, label, note)
 
 
+EXAMPLE_PLANS = sorted((REPO / "examples").glob("*/plans"))
+
+
+@pytest.mark.parametrize("plans", EXAMPLE_PLANS, ids=lambda p: p.parent.name)
+def test_example_boards_plans_follow_the_same_rule(plans):
+    """The example boards' plans (issue 36: "limits by formula from the profile") hold to the
+    rule of test_plans/: no literal acceptance bound, and every regression bound's note names
+    its measurement."""
+    from hil.run.runner import expand_plan_paths
+
+    assert not literal_acceptance_limits([plans], root=plans)
+    for path in expand_plan_paths([plans]):
+        for check in load_plan(path).checks:
+            for label in [None, *check.profile_limits]:
+                role, note = check.role_for(label)
+                if role == "regression":
+                    assert "measured" in note.lower(), (path, check.name, label, note)
+
+
 def test_the_walker_finds_a_literal_acceptance_limit(tmp_path):
     """The walk above can fail: plan 01 with its rise time's formulas replaced by numbers is
     reported, and the same check relabelled regression with a note is not."""
