@@ -3,7 +3,9 @@ malformed, out-of-order and out-of-range frames, and a runner that plays one ben
 against it and says how the session ended.
 
 Each session draws its board from its own seed (``session_seed(base, index)``): how it answers
-HELLO and the parameters, and per SAMPLE a mix of valid answers, stale and future periods,
+HELLO and the parameters (some advertise SENSOR_SET and answer its PARAM_GET with a set, NaN,
+reserved bits, a fraction, a huge value, a refusal or nothing, and then get SAMPLE_SENSORS),
+and per SAMPLE a mix of valid answers, stale and future periods,
 GATES with reserved bits or shoot-through, DUTY, TELEMETRY with NaN, infinities and huge
 values, FAULT and STATUS with values no board should send, unknown types, frames of the
 bench's own types, bursts of HEARTBEAT, damaged frames (serial: bad CRC, bad COBS, wrong
@@ -49,10 +51,12 @@ from protocol.can_mapping import DEFAULT_BASE_ID, ROLE_STRIDE, can_pack  # noqa:
 from protocol.codec import FrameEncoder, StreamDecoder  # noqa: E402
 from protocol.messages import (  # noqa: E402
     PROTOCOL_VERSION, Command, Duty, Fault, Gates, Heartbeat, Hello, MsgType, ParamGet, ParamSet,
-    ParamValue, Role, Sample, Shutdown, Status, Telemetry,
+    ParamValue, Role, Sample, SampleSensors, Shutdown, Status, Telemetry,
 )
 
-CAP_GATES, CAP_DUTY, CAP_TELEMETRY, CAP_CAN = 0x1, 0x2, 0x4, 0x8
+CAP_GATES, CAP_DUTY, CAP_TELEMETRY, CAP_CAN, CAP_SENSOR_SET = 0x1, 0x2, 0x4, 0x8, 0x20
+SENSOR_SET_PARAM_ID = 8
+HALL_SIX_STEP_SET = 0x002F      # currents a, b, c, DC link, Halls
 TRANSPORTS = ("pty", "can", "exec")
 
 # What a board may do for one SAMPLE; each session weighs them its own way.
@@ -103,6 +107,8 @@ class BoardPlan:
     weights: dict[str, float]
     end_after: int | None       # SAMPLEs answered before the end below (None: never)
     end: str                    # close | silence | flood | stream (HEARTBEATs unasked, always)
+    sensor_set: str             # none | valid | nan | reserved | fraction | huge | unknown | silent:
+    #                             SENSOR_SET capability and the answer to PARAM_GET SENSOR_SET
 
     @classmethod
     def draw(cls, seed: int) -> "BoardPlan":
@@ -121,7 +127,14 @@ class BoardPlan:
         weights["silence"] *= 0.3
         end_after = rng.randrange(0, 400) if rng.random() < 0.3 else None
         end = rng.choice(("close", "silence", "flood", "stream"))
-        return cls(seed, hello, params, rng.randrange(9), kind, caps, weights, end_after, end)
+        param_victim = rng.randrange(9)
+        # Drawn last, so that every other choice of a seed is what it was before sensor sets.
+        sensor_set = rng.choices(("none", "valid", "nan", "reserved", "fraction", "huge",
+                                  "unknown", "silent"), (70, 18, 2, 2, 2, 2, 2, 2))[0]
+        if sensor_set != "none":
+            caps |= CAP_SENSOR_SET
+        return cls(seed, hello, params, param_victim, kind, caps, weights, end_after, end,
+                   sensor_set)
 
 
 class HostileBoard:
@@ -194,10 +207,24 @@ class HostileBoard:
                 value = rng.choice((math.inf, -math.inf, 3.4028234e38))
             self.params[pid] = value
             return [ParamValue(pid, 0, value)]
+        if pid == SENSOR_SET_PARAM_ID and plan.sensor_set != "none":
+            return self._sensor_set_answer()
         value = self.params.get(pid, 0.0)
         if plan.params == "readback" and pid == self.victim_id:
             value = _wild_float(rng)
         return [ParamValue(pid, 0, value)]
+
+    def _sensor_set_answer(self) -> list:
+        """PARAM_VALUE of SENSOR_SET: the set, or a value no board should send."""
+        mode = self.plan.sensor_set
+        if mode == "silent":
+            return []
+        if mode == "unknown":
+            return [ParamValue(SENSOR_SET_PARAM_ID, 1, 0.0)]
+        value = {"valid": float(HALL_SIX_STEP_SET), "nan": math.nan,
+                 "reserved": float(HALL_SIX_STEP_SET | 0x0400), "fraction": 47.5,
+                 "huge": 3.4028234e38}[mode]
+        return [ParamValue(SENSOR_SET_PARAM_ID, 0, value)]
 
     # -- the periods
     def _answer(self, k: int, kind: type | None = None) -> object:
@@ -259,14 +286,15 @@ class HostileBoard:
                           rng.getrandbits(32), 0, b"")]
         if action == "bench_types":
             return [rng.choice((Sample(k, 1, 2, 3, 4, 5), Command(1, 0, 1.0, 0.0, 0.0),
-                                ParamSet(1, 1.0), ParamGet(1), Shutdown()))]
+                                ParamSet(1, 1.0), ParamGet(1), Shutdown(),
+                                SampleSensors(k, 0x0021, 0, adc_ia=2048, hall=1)))]
         if action == "damage":
             return [("damage", None) for _ in range(rng.randrange(1, 4))]
         if action == "silence":
             return []
         raise AssertionError(action)
 
-    def _sample(self, msg: Sample) -> list:
+    def _sample(self, msg: Sample | SampleSensors) -> list:
         plan, rng = self.plan, self.rng
         self.samples += 1
         k = msg.period
@@ -298,7 +326,7 @@ class HostileBoard:
             return self._hello(msg)
         if isinstance(msg, (ParamSet, ParamGet)):
             return self._param(msg)
-        if isinstance(msg, Sample):
+        if isinstance(msg, (Sample, SampleSensors)):
             return self._sample(msg)
         if isinstance(msg, Command):
             return [Status(0, self.rng.randrange(3), 0)] if self.rng.random() < 0.3 else []
@@ -624,6 +652,7 @@ OUTCOME_KINDS = (
     ("parameter", "refused parameter"),
     ("parameter", "PARAM_GET reads back"),
     ("parameter", "with a non-finite value in force"),
+    ("sensor_set", "parameter sensor_set (id 8"),
 )
 
 
