@@ -185,3 +185,23 @@ def test_a_speed_reference_from_the_mailbox_reaches_the_board():
     speed = arrays["plant.speed_rpm"][1]
     assert ref[3999] == 1500 and ref[-1] == 2000
     assert abs(speed[3999] - 1500) < 30 and abs(speed[-1] - 2000) < 30
+
+
+def test_realtime_board_that_closes_its_line_ends_the_session_named_and_safe(tmp_path):
+    """A board that closes its line in a real-time run: the session ends with "link failed" at
+    the period it happened, the plant safe-stated and the log readable (the lockstep loop's
+    rule; the real-time loop let the LinkError through as it was). The watchdog and the miss
+    budget are set out of reach, and the period is long, so only the closed line can end it."""
+    log = tmp_path / "closed.mcap"
+    with FakeBoard(die_after_samples=20) as board:
+        session = BenchSession(load_profile(), SessionConfig(
+            link=board.url, log_path=log, mode="realtime", realtime_period_s=2e-3,
+            watchdog_periods=100_000, watchdog_s=60.0, realtime_miss_budget=100_000))
+        with pytest.raises(SessionError) as err:
+            with session:
+                session.run_periods(2000)
+    text = str(err.value)
+    assert "link failed at period" in text and "closed the line" in text
+    assert session.plant.period < 2000
+    kinds = list(read_log(log)["/plan/events"]["kind"])
+    assert "link_failed" in kinds

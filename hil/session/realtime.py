@@ -91,81 +91,91 @@ def run_realtime(session, count: int, stop: Callable[[], bool] | None = None,
     stats["cpu_dma_latency"] = session.cpu_latency.status
     t0 = clock()
     done = 0
-    for done in range(1, count + 1):
-        deadline = t0 + (done - 1) * period_ns
-        # Drain answers until the deadline: sleep most of the way, spin the rest.
-        while True:
-            now = clock()
-            msg = link.recv(0.0)
-            while msg is not None:
-                t = type(msg)
-                if t is Gates or t is Duty or t is DutyLegs:
-                    # an answer to a SAMPLE sent (period < plant.period); a future one is not
-                    if answered_period < msg.period < plant.period:
-                        answered_period = msg.period
-                        if t is Gates:      # (bits 6-7 reserved: ignored, SPEC 4)
-                            latest_gates, latest_duty = msg.gates & 0x3F, None
-                        else:
-                            d = msg.duty
-                            latest_gates, latest_duty = None, (d[0] / 65535.0, d[1] / 65535.0,
-                                                               d[2] / 65535.0)
-                        # DUTY_LEGS floats the legs whose bit is 0 (reserved bits ignored)
-                        latest_legs = msg.leg_enable & LEGS_ALL if t is DutyLegs else None
-                        watchdog.answered()
-                    else:
-                        late_answers += 1
-                else:
-                    dispatch(msg)
+    recording = False
+    try:
+        for done in range(1, count + 1):
+            deadline = t0 + (done - 1) * period_ns
+            # Drain answers until the deadline: sleep most of the way, spin the rest.
+            while True:
+                now = clock()
                 msg = link.recv(0.0)
-            remaining = deadline - clock()
-            if remaining <= 0:
-                break
-            if remaining > spin_s * 1e9:
-                sleep((remaining - spin_s * 1e9) / 1e9)
-        tick = clock()
-        late_s = (tick - deadline) / 1e9
-        lateness.append(late_s)
-        if sampler is None:
-            sample, msg_out = plant.sample(), None
-        else:
-            sample, msg_out = sampler()
-        k = sample.period
-        if late_s > period_s:
-            misses += 1
-            # in the event list, the log and on the console (hil.run.console, rate-limited)
-            session.event("deadline_miss", period=k, late_us=late_s * 1e6)
-        if k > 0 and answered_period < k - 1:
-            missing += 1
-            session.event("missed", period=k - 1)     # no answer to the last SAMPLE by this tick
-            why = watchdog.missed()
-            if why is not None:
+                while msg is not None:
+                    t = type(msg)
+                    if t is Gates or t is Duty or t is DutyLegs:
+                        # an answer to a SAMPLE sent (period < plant.period); a future one is not
+                        if answered_period < msg.period < plant.period:
+                            answered_period = msg.period
+                            if t is Gates:      # (bits 6-7 reserved: ignored, SPEC 4)
+                                latest_gates, latest_duty = msg.gates & 0x3F, None
+                            else:
+                                d = msg.duty
+                                latest_gates, latest_duty = None, (d[0] / 65535.0, d[1] / 65535.0,
+                                                                   d[2] / 65535.0)
+                            # DUTY_LEGS floats the legs whose bit is 0 (reserved bits ignored)
+                            latest_legs = msg.leg_enable & LEGS_ALL if t is DutyLegs else None
+                            watchdog.answered()
+                        else:
+                            late_answers += 1
+                    else:
+                        dispatch(msg)
+                    msg = link.recv(0.0)
+                remaining = deadline - clock()
+                if remaining <= 0:
+                    break
+                if remaining > spin_s * 1e9:
+                    sleep((remaining - spin_s * 1e9) / 1e9)
+            tick = clock()
+            late_s = (tick - deadline) / 1e9
+            lateness.append(late_s)
+            if sampler is None:
+                sample, msg_out = plant.sample(), None
+            else:
+                sample, msg_out = sampler()
+            k = sample.period
+            if late_s > period_s:
+                misses += 1
+                # in the event list, the log and on the console (hil.run.console, rate-limited)
+                session.event("deadline_miss", period=k, late_us=late_s * 1e6)
+            if k > 0 and answered_period < k - 1:
+                missing += 1
+                session.event("missed", period=k - 1)     # no answer to the last SAMPLE by this tick
+                why = watchdog.missed()
+                if why is not None:
+                    plant.safe_state()
+                    session.rt_answered_period = answered_period
+                    why = session._with_report(why)
+                    session.error = (f"watchdog: {why}; at period {k} (t = {k * session.period_s:.6f} s) "
+                                     f"on '{session.config.link}'")
+                    session.event("watchdog", period=k, reason=why)
+                    _store(stats, lateness, period_s, late_answers, missing, overruns)
+                    raise SessionError(session.error)
+            if msg_out is None:
+                msg_out = Sample(k, sample.adc_i1, sample.adc_i2, sample.adc_vdc, sample.encoder,
+                                 sample.status)
+            link.send(msg_out)
+            recording = True    # a failing log (a full disk) is not the link's failure
+            recorder.period(k, plant.truth(), sample)
+            recording = False
+            if latest_duty is None:
+                plant.step(latest_gates)
+            else:
+                plant.step(duty=latest_duty, legs=latest_legs)
+            if clock() - tick > period_ns:
+                overruns += 1
+            if misses > budget:
                 plant.safe_state()
-                session.rt_answered_period = answered_period
-                why = session._with_report(why)
-                session.error = (f"watchdog: {why}; at period {k} (t = {k * session.period_s:.6f} s) "
-                                 f"on '{session.config.link}'")
-                session.event("watchdog", period=k, reason=why)
+                session.error = (f"real-time clock missed {misses} deadlines (budget {budget}) "
+                                 f"at {period_s * 1e6:g} us per period")
                 _store(stats, lateness, period_s, late_answers, missing, overruns)
                 raise SessionError(session.error)
-        if msg_out is None:
-            msg_out = Sample(k, sample.adc_i1, sample.adc_i2, sample.adc_vdc, sample.encoder,
-                             sample.status)
-        link.send(msg_out)
-        recorder.period(k, plant.truth(), sample)
-        if latest_duty is None:
-            plant.step(latest_gates)
-        else:
-            plant.step(duty=latest_duty, legs=latest_legs)
-        if clock() - tick > period_ns:
-            overruns += 1
-        if misses > budget:
-            plant.safe_state()
-            session.error = (f"real-time clock missed {misses} deadlines (budget {budget}) "
-                             f"at {period_s * 1e6:g} us per period")
-            _store(stats, lateness, period_s, late_answers, missing, overruns)
-            raise SessionError(session.error)
-        if stop is not None and stop():
-            break
+            if stop is not None and stop():
+                break
+    except OSError as exc:      # LinkError is an OSError: the line is gone (a board that closed it)
+        if recording:
+            raise
+        session.rt_answered_period = answered_period
+        _store(stats, lateness, period_s, late_answers, missing, overruns)
+        session._link_failed(plant.period, exc)    # safe-states the plant, names the period
     session.rt_answered_period = answered_period
     _store(stats, lateness, period_s, late_answers, missing, overruns)
     return done
