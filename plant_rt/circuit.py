@@ -62,6 +62,16 @@ ZERO_CURRENT_A = 1e-9
 MAX_EVENTS_PER_INTERVAL = 64
 
 
+def _dc_current(kinds: list[int], cur: tuple) -> float:
+    """The DC-link current: the phase currents of the legs tied to DC+ (high switch or high
+    diode)."""
+    idc = 0.0
+    for x in range(3):
+        if kinds[x] == H or kinds[x] == N:
+            idc += cur[x]
+    return idc
+
+
 class Network:
     """Leg states that persist across intervals, the general RHS and the event-aware RK4."""
 
@@ -290,10 +300,7 @@ class Network:
             ib = s * i_d + c * i_q
             cur = (ia, -0.5 * ia + S32 * ib, -0.5 * ia - S32 * ib)
             kinds = self.kinds
-            idc = 0.0
-            for x in range(3):
-                if kinds[x] == H or kinds[x] == N:
-                    idc += cur[x]
+            idc = _dc_current(kinds, cur)
             vdc = dc.voltage(v, idc)
             va, vb = self._terminal_ab(kinds, cur, vdc)
             if self.zero:
@@ -313,12 +320,7 @@ class Network:
             self.cur = cur
         self.vdc = vdc
         self.te = te
-        if self.load.locked:
-            dw = 0.0
-        else:
-            t_a, v0, slope = self._tl
-            dw = (te - m.b * w - ((v0 + slope * (t - t_a)) + self.load.kw * w)) * m.ij
-        return dpa, dpb, dw, w, dc.dv_dt(v, idc), va, vb, idc
+        return dpa, dpb, self._speed_rate(t, w, te), w, dc.dv_dt(v, idc), va, vb, idc
 
     def _rhs_shaped(self, t: float, pa: float, pb: float, w: float, th: float, v: float
                     ) -> tuple[float, float, float, float, float, float, float, float]:
@@ -344,10 +346,7 @@ class Network:
             ib = (pb - mb) * ild
             cur = (ia, -0.5 * ia + S32 * ib, -0.5 * ia - S32 * ib)
             kinds = self.kinds
-            idc = 0.0
-            for x in range(3):
-                if kinds[x] == H or kinds[x] == N:
-                    idc += cur[x]
+            idc = _dc_current(kinds, cur)
             vdc = dc.voltage(v, idc)
             va, vb = self._terminal_ab(kinds, cur, vdc)
             if self.zero:
@@ -362,12 +361,16 @@ class Network:
             self.cur = cur
         self.vdc = vdc
         self.te = te
+        return dpa, dpb, self._speed_rate(t, w, te), w, dc.dv_dt(v, idc), va, vb, idc
+
+    def _speed_rate(self, t: float, w: float, te: float) -> float:
+        """dw/dt from the torque te at time t: J dw/dt = te - b w - (load profile + kw w); 0 with
+        the rotor locked."""
         if self.load.locked:
-            dw = 0.0
-        else:
-            t_a, v0, slope = self._tl
-            dw = (te - m.b * w - ((v0 + slope * (t - t_a)) + self.load.kw * w)) * m.ij
-        return dpa, dpb, dw, w, dc.dv_dt(v, idc), va, vb, idc
+            return 0.0
+        m = self.motor
+        t_a, v0, slope = self._tl
+        return (te - m.b * w - ((v0 + slope * (t - t_a)) + self.load.kw * w)) * m.ij
 
     def _terminal_ab(self, kinds: list[int], cur: tuple, vdc: float) -> tuple[float, float]:
         """u_ab of the driven and diode-conducting terminals (eq. (7); an O phase adds 0)."""

@@ -708,9 +708,7 @@ class Plant:
         if self._zero_current:
             ia = ib = 0.0
         elif self.motor.trapezoidal:
-            ia, ib, _, _ = self.motor.currents(self._pa, self._pb, th)
-            if self._open_phase is not None:
-                ia, ib = _cut_phase(self._open_phase, ia, ib)[3:]
+            ia, ib = self._currents_ab()
         else:
             m = self.motor
             e = m.p * th
@@ -771,14 +769,8 @@ class Plant:
         """After every period (an 'after' hook, installed when the profile enables the thermal
         model): the winding temperature advances with the copper loss at the period's end held
         over the period, and the motor's resistance follows."""
-        if self._zero_current:
-            ia = ib = 0.0
-        else:
-            ia, ib, _, _ = self.motor.currents(self._pa, self._pb, self._th)
-            if self._open_phase is not None:
-                ia, ib = _cut_phase(self._open_phase, ia, ib)[3:]
         thermal = self._thermal
-        thermal.advance(thermal.copper_loss_w(ia, ib))
+        thermal.advance(thermal.copper_loss_w(*self._currents_ab()))
         self._apply_winding_resistance()
 
     def _apply_winding_resistance(self) -> None:
@@ -787,6 +779,16 @@ class Plant:
         r = self._thermal.resistance_ohm()
         if abs(r - self.motor.r) > 1e-6 * self.motor.r:
             self.set_motor_param("resistance_ohm", r)
+
+    def _currents_ab(self) -> tuple[float, float]:
+        """(i_alpha, i_beta) at t_k through the motor's own currents(), either back-EMF shape:
+        zero once the currents have died, an open phase cut."""
+        if self._zero_current:
+            return 0.0, 0.0
+        ia, ib, _, _ = self.motor.currents(self._pa, self._pb, self._th)
+        if self._open_phase is not None:
+            ia, ib = _cut_phase(self._open_phase, ia, ib)[3:]
+        return ia, ib
 
     def _back_emf(self) -> tuple[float, float, float]:
         return self.motor.phase_back_emf_v(self.motor.p * self._th, self._w)

@@ -8,19 +8,14 @@ what the board's set has (hil.run.runner.check_plan_board).
 """
 from __future__ import annotations
 
-#: sensor name (SENSOR_SET_NAMES) -> its fields in SAMPLE_SENSORS, in wire order.
+from protocol.codec import SENSOR_FIELDS
+from protocol.messages import SENSOR_SET_NAMES
+
+_NAME_OF_BIT = {bit: name for name, bit in SENSOR_SET_NAMES.items()}
+#: sensor name (SENSOR_SET_NAMES) -> its fields in SAMPLE_SENSORS, in wire order (the codec's
+#: table, protocol.codec.SENSOR_FIELDS, by name).
 SENSOR_FIELDS_OF: dict[str, tuple[str, ...]] = {
-    "current_a": ("adc_ia",),
-    "current_b": ("adc_ib",),
-    "current_c": ("adc_ic",),
-    "vdc": ("adc_vdc",),
-    "encoder": ("encoder",),
-    "hall": ("hall",),
-    "terminal_voltages": ("adc_va", "adc_vb", "adc_vc"),
-    "bemf_comparators": ("bemf_comparators",),
-    "resolver": ("adc_resolver_sin", "adc_resolver_cos"),
-    "temperature": ("adc_temperature",),
-}
+    _NAME_OF_BIT[bit]: names for bit, names, _codes, _limit in SENSOR_FIELDS}
 #: Every SAMPLE_SENSORS sensor field, in wire order.
 ALL_SENSOR_FIELDS: tuple[str, ...] = tuple(f for fields in SENSOR_FIELDS_OF.values()
                                            for f in fields)
@@ -35,8 +30,6 @@ WINDING_TEMPERATURE_SIGNAL = "plant.winding_temperature_degc"
 
 def fields_of_set(mask: int) -> tuple[str, ...]:
     """The fields a sensor set's mask carries, in wire order."""
-    from protocol.messages import SENSOR_SET_NAMES
-
     return tuple(f for name, fields in SENSOR_FIELDS_OF.items()
                  if mask & SENSOR_SET_NAMES[name] for f in fields)
 

@@ -1080,7 +1080,8 @@ def _ns_text(period_s: float) -> str:
     return f"{round(period_s * 1e9)} ns" if math.isfinite(period_s) else f"{period_s} s"
 
 
-_FAULT_UNITS = {1: "A", 2: "s", 3: "V", 4: "s", 7: "s"}
+_FAULT_UNITS = {FaultCode.OVERCURRENT: "A", FaultCode.ENCODER_LOSS: "s", FaultCode.DC_LINK: "V",
+                FaultCode.WATCHDOG: "s", FaultCode.STALL: "s"}   # FAULT `value` units (SPEC 9.6)
 
 
 def _fault_text(msg: Fault, period_s: float) -> str:
